@@ -1,0 +1,65 @@
+/* nd_cem: the one cross-entropy optimiser of the project.
+ *
+ * Configured as iCEM (Pinneri et al. 2020) it plans keypoint sequences; configured as
+ * plain CEM it fits model parameters. The decision vector has dim = horizon * block
+ * entries laid out horizon-major (block values of step 0, then step 1, ...); colored
+ * noise is correlated along the horizon. Costs come from a batch callback so the
+ * caller can spread the evaluations over a pool. All memory is allocated by
+ * nd_cem_create; nd_cem_run allocates nothing. */
+#ifndef ND_CEM_H
+#define ND_CEM_H
+
+#include "nd_rng.h"
+
+/* Evaluate n candidates x[i * dim .. i * dim + dim) into cost[i]. Return 0, or
+ * non-zero to abort the run. Non-finite costs are treated as +inf. */
+typedef int (*nd_cem_cost_fn)(void *ctx, const double *x, int n, double *cost);
+
+typedef struct {
+  int horizon;        /* steps along which noise may be colored (>= 1) */
+  int block;          /* values per step (>= 1); dim = horizon * block */
+  int pop;            /* population of the first iteration (N, Q) */
+  int iters;          /* iterations per run (C) */
+  double elite_frac;  /* elite fraction rho in (0, 1] */
+  double keep_frac;   /* fraction of elites carried into the next iteration (iCEM); 0 = none */
+  double pop_decay;   /* iCEM gamma >= 1: population of iteration i is pop * gamma^-i */
+  double momentum;    /* alpha in [0, 1): new = alpha * old + (1 - alpha) * elite stats */
+  double noise_beta;  /* colored-noise exponent (0 white, 2 ~ iCEM's default) */
+  double std_min;     /* floor of every std after an update */
+  const double *lower; /* per-dim bounds (dim values) or NULL for none; samples clipped */
+  const double *upper;
+  int inject_mean;    /* evaluate the mean as a candidate in the last iteration */
+} nd_cem_cfg;
+
+/* Fill cfg with plain-CEM defaults for the given shape (white noise, no keep, no decay). */
+void nd_cem_cfg_default(nd_cem_cfg *cfg, int horizon, int block, int pop, int iters);
+
+typedef struct nd_cem nd_cem;
+
+/* Allocate an optimiser for cfg (bounds are copied). NULL and a message if cfg is invalid. */
+nd_cem *nd_cem_create(const nd_cem_cfg *cfg, char *err, int errlen);
+void nd_cem_free(nd_cem *cem);
+
+/* Set the sampling distribution (dim values each) and forget kept elites. */
+void nd_cem_set_dist(nd_cem *cem, const double *mean, const double *std);
+
+/* Warm start for the next run: shift mean and kept elites `steps` steps earlier along
+ * the horizon, fill the freed tail with its last step, and reset std to std_init. */
+void nd_cem_shift(nd_cem *cem, int steps, const double *std_init);
+
+/* Run cfg.iters iterations from the current distribution with generator r (all sampling
+ * happens on the calling thread, so results do not depend on how costs are spread).
+ * Return 0, or the callback's non-zero code. */
+int nd_cem_run(nd_cem *cem, nd_rng *r, nd_cem_cost_fn fn, void *ctx);
+
+int nd_cem_dim(const nd_cem *cem);
+const double *nd_cem_mean(const nd_cem *cem);       /* current mean (dim) */
+const double *nd_cem_std(const nd_cem *cem);        /* current std (dim) */
+const double *nd_cem_best(const nd_cem *cem);       /* best candidate of the last run (dim) */
+double nd_cem_best_cost(const nd_cem *cem);         /* its cost */
+/* Best cost seen in iteration i of the last run, i < cfg.iters. */
+double nd_cem_iter_best(const nd_cem *cem, int i);
+/* Number of cost evaluations in the last run. */
+int nd_cem_evals(const nd_cem *cem);
+
+#endif

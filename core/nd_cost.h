@@ -1,0 +1,41 @@
+/* nd_cost: the plan cost terms and the task's terminal condition (DESIGN.md sec. 4). */
+#ifndef ND_COST_H
+#define ND_COST_H
+
+/* A goal pose of the object in the table plane. */
+typedef struct {
+  double x, y, yaw;
+} nd_goal;
+
+/* Weights of the plan cost E = L_pos + w_rot L_rot + w_prox L_prox + w_acc L_acc. */
+typedef struct {
+  double w_rot, w_prox, w_acc;
+} nd_cost_weights;
+
+/* The project's default weights (see nd_cost.c for why they differ from the paper). */
+nd_cost_weights nd_cost_weights_default(void);
+
+/* L_pos = |obj - goal|^2 over (x, y). */
+double nd_cost_pos(const double obj_xy[2], const nd_goal *goal);
+
+/* L_rot = sin^2(yaw - goal yaw): zero at the goal yaw and at goal yaw + pi (cuboid symmetry). */
+double nd_cost_rot(double obj_yaw, const nd_goal *goal);
+
+/* L_prox = |obj - ee|^2 over (x, y). */
+double nd_cost_prox(const double obj_xy[2], const double ee_xy[2]);
+
+/* E of a rollout's final state; acc_sq_mean is L_acc, the mean of |a_ee|^2 over its steps. */
+double nd_cost_plan(const nd_cost_weights *w, const nd_goal *goal, const double obj_xy[2],
+                    double obj_yaw, const double ee_xy[2], double acc_sq_mean);
+
+/* Task error L_pos + w_rot L_rot, the quantity the terminal condition compares to eps. */
+double nd_task_error(const nd_cost_weights *w, const nd_goal *goal, const double obj_xy[2],
+                     double obj_yaw);
+
+typedef enum { ND_TASK_RUNNING = 0, ND_TASK_SUCCESS = 1, ND_TASK_TIMEOUT = 2 } nd_task_status;
+
+/* Terminal condition: success when task_error < eps, timeout when t > tau, else running.
+ * Success wins when both hold. A non-finite error counts as not reached. */
+nd_task_status nd_task_check(double task_error, double t, double eps, double tau);
+
+#endif

@@ -1,0 +1,36 @@
+/* nd_snap: closed-form minimum-snap segments (7th-degree polynomials).
+ *
+ * One axis: p(t) = sum_k c[k] t^k on [0, T] with p, p', p'', p''' at t=0 given and
+ * p(T) = p1, p'(T) = v1, p''(T) = 0, p'''(T) = 0. Eight conditions fix the eight
+ * coefficients; the resulting polynomial minimises the integral of squared snap. */
+#ifndef ND_SNAP_H
+#define ND_SNAP_H
+
+/* Kinematic state of one axis: position, velocity, acceleration, jerk. */
+enum { ND_P = 0, ND_V = 1, ND_A = 2, ND_J = 3 };
+
+/* Coefficients of one axis from start state s0 = (p, v, a, j) to (p1, v1, 0, 0) at T > 0. */
+void nd_snap_coeffs(const double s0[4], double p1, double v1, double T, double c[8]);
+
+/* Evaluate (p, v, a, j) of coefficients c at time t (no clamping). */
+void nd_snap_eval_poly(const double c[8], double t, double out[4]);
+
+/* Integral of squared snap of coefficients c over [0, T] (exact). */
+double nd_snap_cost(const double c[8], double T);
+
+/* A planar segment: two axes (x, y) sharing one duration. */
+typedef struct {
+  double T;         /* duration, seconds */
+  double c[2][8];   /* coefficients per axis */
+} nd_snap_seg;
+
+/* Build a planar segment from start state s0[axis][p,v,a,j] to position p1 and
+ * velocity v1 (both [x, y]) with zero acceleration and jerk at T > 0. */
+void nd_snap_seg_make(nd_snap_seg *seg, const double s0[2][4], const double p1[2],
+                      const double v1[2], double T);
+
+/* State out[axis][p,v,a,j] at time t. For t > T the segment continues at its end
+ * velocity (p1 + v1 (t - T), v1, 0, 0); for t < 0 it evaluates at 0. */
+void nd_snap_seg_eval(const nd_snap_seg *seg, double t, double out[2][4]);
+
+#endif

@@ -1,0 +1,37 @@
+/* nds_ctrl: the end-effector's low-level tracking controller (the robot's, not the model's).
+ *
+ * In simulation the sphere is driven by a force on its two slide joints: a PID toward the
+ * min-snap setpoint with acceleration feed-forward. The velocity mode tracks a recorded
+ * end-effector velocity, for replaying a real robot's rollouts. Gains are properties of
+ * the robot and do not change with theta. */
+#ifndef NDS_CTRL_H
+#define NDS_CTRL_H
+
+typedef struct {
+  double kp, kd, ki;  /* N/m, N s/m, N/(m s) */
+  double i_max;       /* anti-windup bound on the integral, m s */
+  double m_ff;        /* acceleration feed-forward mass, kg */
+  double f_max;       /* force saturation per axis, N */
+  double kv;          /* velocity mode gain, N s/m */
+} nds_ctrl_cfg;
+
+/* Gains that are stable for the default sphere at timesteps up to 10 ms. */
+void nds_ctrl_cfg_default(nds_ctrl_cfg *cfg);
+
+typedef struct {
+  double integ[2];
+} nds_ctrl;
+
+/* Zero the controller's memory. */
+void nds_ctrl_reset(nds_ctrl *c);
+
+/* PID force f[2] toward setpoint sp[axis][p, v, a, j] from sphere position and velocity,
+ * advancing the integral by dt. */
+void nds_ctrl_pid(const nds_ctrl_cfg *cfg, nds_ctrl *c, const double sp[2][4],
+                  const double pos[2], const double vel[2], double dt, double f[2]);
+
+/* Velocity-tracking force toward v_ref[2]. */
+void nds_ctrl_vel(const nds_ctrl_cfg *cfg, const double v_ref[2], const double vel[2],
+                  double f[2]);
+
+#endif

@@ -1,0 +1,62 @@
+/* nds_model: the pushing scene as a MuJoCo model, and applying theta to it.
+ *
+ * The scene is a table plane, a cuboid object on a free joint and a spherical
+ * end-effector on two slide joints (x, y) held at table height. An nds_model owns one
+ * mjModel plus the indices the rest of sim/ needs; it is constant once built, except
+ * through nds_theta_apply. Workers that need different theta own their own copy. */
+#ifndef NDS_MODEL_H
+#define NDS_MODEL_H
+
+#include <mujoco/mujoco.h>
+
+/* theta = (sliding, torsional, rolling friction, end-effector sphere mass). */
+enum { NDS_TH_SLIDE = 0, NDS_TH_TORSION, NDS_TH_ROLL, NDS_TH_MASS, NDS_NTHETA };
+
+/* Ground truth of the simulation study: MuJoCo's default friction and a 1 kg sphere. */
+extern const double nds_theta_true[NDS_NTHETA];
+
+typedef struct {
+  double obj_half[3];    /* cuboid half sizes (x, y, z), m */
+  double obj_mass;       /* kg */
+  double ee_radius;      /* m */
+  double timestep;       /* s */
+  int condim;            /* 3, 4 or 6: torsional needs >= 4, rolling needs 6 */
+  double theta[NDS_NTHETA];
+} nds_scene_cfg;
+
+/* Defaults: 10 x 6 x 5 cm, 0.5 kg box; 2.5 cm sphere; 1 ms; condim 6; nds_theta_true. */
+void nds_scene_cfg_default(nds_scene_cfg *cfg);
+
+typedef struct {
+  mjModel *m;
+  nds_scene_cfg cfg;      /* what the model was built from (theta tracks nds_theta_apply) */
+  int obj_body, ee_body;
+  int obj_qpos, obj_dof;  /* free joint: qpos 7 (pos, w-first quat), dof 6 */
+  int ee_qpos[2], ee_dof[2];
+  double ee_height;       /* z of the sphere centre */
+} nds_model;
+
+/* Write the scene's MJCF for cfg into buf. Return 0, or -1 with a message. */
+int nds_scene_xml(const nds_scene_cfg *cfg, char *buf, int len, char *err, int errlen);
+
+/* Build the model of cfg (validated, theta applied). Return 0, or -1 with a message. */
+int nds_model_init(nds_model *nm, const nds_scene_cfg *cfg, char *err, int errlen);
+
+/* Load a user MJCF file that has bodies "object" (free joint) and "ee" (slide joints
+ * "ee_x", "ee_y"); theta from cfg is applied. Return 0, or -1 naming the file. */
+int nds_model_load_file(nds_model *nm, const char *path, const nds_scene_cfg *cfg,
+                        char *err, int errlen);
+
+/* Deep copy src into dst (own mjModel). Return 0, or -1 with a message. */
+int nds_model_copy(nds_model *dst, const nds_model *src, char *err, int errlen);
+
+/* Free what nm owns; nm may be zeroed or half-built. */
+void nds_model_free(nds_model *nm);
+
+/* Check theta: finite, frictions >= 0, mass > 0. Return 0, or -1 naming the bad value. */
+int nds_theta_check(const double theta[NDS_NTHETA], char *err, int errlen);
+
+/* Apply theta to the model's contacts and sphere mass. Return 0, or -1 (model unchanged). */
+int nds_theta_apply(nds_model *nm, const double theta[NDS_NTHETA], char *err, int errlen);
+
+#endif

@@ -1,0 +1,61 @@
+/* nds_planner: one MPC planning step. (state, setpoint, goal, theta, previous plan) ->
+ * best keypoint sequence, by iCEM over M keypoints (x, y, vx, vy) with MuJoCo rollouts
+ * on the pool. Candidates whose segments exceed the end-effector speed or acceleration
+ * limits are penalised, so what is planned is what the robot can execute. */
+#ifndef NDS_PLANNER_H
+#define NDS_PLANNER_H
+
+#include <stdint.h>
+
+#include "nd_cem.h"
+#include "nd_cost.h"
+#include "nds_rollout.h"
+
+typedef struct {
+  int pop, iters;           /* iCEM N and C */
+  int M;                    /* keypoints per plan */
+  double T;                 /* duration of each segment, s */
+  double elite_frac, keep_frac, pop_decay, momentum, noise_beta;
+  double std_init[4];       /* initial std of (x, y, vx, vy) */
+  double std_min;
+  double ws_lo[2], ws_hi[2];/* workspace bounds of keypoint positions */
+  double key_v_max;         /* bound of keypoint velocities, m/s */
+  double v_max, a_max;      /* end-effector limits the segments must respect */
+  double limit_penalty;     /* added cost per unit of relative excess over a limit */
+  nd_cost_weights w;
+  nds_ctrl_cfg ctrl;
+  uint64_t seed;
+} nds_planner_cfg;
+
+/* Paper's simulation settings (N 128, C 4, M 2, T 0.3 s) with the project's limits. */
+void nds_planner_cfg_default(nds_planner_cfg *cfg);
+
+typedef struct {
+  double keys[NDS_MAX_KEYS][4]; /* best keypoint sequence */
+  int M;
+  double T;
+  double cost;              /* E of the best candidate (penalties included) */
+  double task_error;        /* predicted L_pos + w_rot L_rot at the horizon */
+  int evals;                /* rollouts run */
+} nds_plan;
+
+typedef struct nds_planner nds_planner;
+
+/* Build a planner over model (copied per worker) on pool. NULL and a message on error. */
+nds_planner *nds_planner_create(const nds_model *model, const nds_planner_cfg *cfg,
+                                nd_pool *pool, char *err, int errlen);
+void nds_planner_free(nds_planner *p);
+
+/* Use theta for every following plan. Return 0, or -1 with a message. */
+int nds_planner_set_theta(nds_planner *p, const double theta[NDS_NTHETA], char *err,
+                          int errlen);
+
+/* Forget the warm start (call at the start of a task). */
+void nds_planner_reset(nds_planner *p);
+
+/* Plan from state s with the executor at setpoint sp0 toward goal. Return 0, or -1 with a
+ * message when the input is not finite (out untouched). */
+int nds_planner_plan(nds_planner *p, const nds_state *s, const double sp0[2][4],
+                     const nd_goal *goal, nds_plan *out, char *err, int errlen);
+
+#endif

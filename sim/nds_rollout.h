@@ -1,0 +1,52 @@
+/* nds_rollout: one rollout of a keypoint sequence, and batches of them on a pool.
+ *
+ * A rollout starts the model at state s0 with the executor's setpoint state sp0, chains
+ * M minimum-snap segments of duration T through the keypoints (x, y, vx, vy), drives the
+ * sphere along them with the tracking controller and steps MuJoCo for M*T seconds. */
+#ifndef NDS_ROLLOUT_H
+#define NDS_ROLLOUT_H
+
+#include "nd_pool.h"
+#include "nds_ctrl.h"
+#include "nds_model.h"
+#include "nds_state.h"
+
+#define NDS_MAX_KEYS 8
+
+typedef struct {
+  double obj_xy[2];     /* final object position */
+  double obj_yaw;       /* final object yaw */
+  double ee_xy[2];      /* final sphere position */
+  double acc_sq_mean;   /* L_acc: mean over steps of |setpoint acceleration|^2 */
+  double v_peak;        /* peak setpoint speed over the rollout, m/s */
+  double a_peak;        /* peak setpoint acceleration magnitude, m/s^2 */
+  int diverged;         /* non-finite state or a MuJoCo instability warning */
+} nds_rollout_out;
+
+/* Run one rollout on d (any prior content). keys holds M * 4 values. Never fails: a
+ * divergence is reported in out->diverged with the other fields unspecified. */
+void nds_rollout(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
+                 const nds_state *s0, const double sp0[2][4], const double *keys, int M,
+                 double T, nds_rollout_out *out);
+
+/* Per-worker MuJoCo copies for parallel rollouts: each worker owns an nds_model copy
+ * (so theta can differ per task) and one mjData, allocated once. */
+typedef struct nds_batch nds_batch;
+
+/* One model copy and mjData per worker of pool. NULL and a message on error. */
+nds_batch *nds_batch_create(const nds_model *proto, nd_pool *pool, char *err, int errlen);
+void nds_batch_free(nds_batch *b);
+
+nd_pool *nds_batch_pool(nds_batch *b);
+nds_model *nds_batch_model(nds_batch *b, int worker);
+mjData *nds_batch_data(nds_batch *b, int worker);
+
+/* Apply theta to every worker's model. Return 0, or -1 with a message (models unchanged). */
+int nds_batch_set_theta(nds_batch *b, const double theta[NDS_NTHETA], char *err, int errlen);
+
+/* Run n rollouts (keys: n * M * 4) from one state in parallel; out has n entries. */
+void nds_batch_rollouts(nds_batch *b, const nds_ctrl_cfg *ctrl, const nds_state *s0,
+                        const double sp0[2][4], const double *keys, int n, int M, double T,
+                        nds_rollout_out *out);
+
+#endif
