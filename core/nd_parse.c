@@ -1,0 +1,66 @@
+/* nd_parse: strict number parsing. strtod/strtol accept trailing junk and silently
+ * saturate; these do not. */
+#include "nd_parse.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+
+int nd_parse_double(const char *s, const char *what, double lo, double hi, double *out,
+                    char *err, int errlen) {
+  char *end;
+  if (!s || !*s) {
+    snprintf(err, errlen, "%s: empty value, expected a number in [%g, %g]", what, lo, hi);
+    return -1;
+  }
+  errno = 0;
+  double v = strtod(s, &end);
+  if (*end || errno == ERANGE || !isfinite(v)) {
+    snprintf(err, errlen, "%s: '%s' is not a finite number", what, s);
+    return -1;
+  }
+  if (v < lo || v > hi) {
+    snprintf(err, errlen, "%s: %g is out of range [%g, %g]", what, v, lo, hi);
+    return -1;
+  }
+  *out = v;
+  return 0;
+}
+
+int nd_parse_int(const char *s, const char *what, long lo, long hi, int *out, char *err,
+                 int errlen) {
+  char *end;
+  if (!s || !*s) {
+    snprintf(err, errlen, "%s: empty value, expected an integer in [%ld, %ld]", what, lo, hi);
+    return -1;
+  }
+  errno = 0;
+  long v = strtol(s, &end, 10);
+  if (*end || errno == ERANGE) {
+    snprintf(err, errlen, "%s: '%s' is not an integer", what, s);
+    return -1;
+  }
+  if (v < lo || v > hi) {
+    snprintf(err, errlen, "%s: %ld is out of range [%ld, %ld]", what, v, lo, hi);
+    return -1;
+  }
+  *out = (int)v;
+  return 0;
+}
+
+int nd_parse_u64(const char *s, const char *what, uint64_t *out, char *err, int errlen) {
+  char *end;
+  if (!s || !*s || *s == '-') {
+    snprintf(err, errlen, "%s: '%s' is not a non-negative integer", what, s ? s : "");
+    return -1;
+  }
+  errno = 0;
+  unsigned long long v = strtoull(s, &end, 10);
+  if (*end || errno == ERANGE) {
+    snprintf(err, errlen, "%s: '%s' is not a non-negative integer", what, s);
+    return -1;
+  }
+  *out = (uint64_t)v;
+  return 0;
+}

@@ -1,0 +1,19 @@
+/* nd_parse: strict parsing of numbers from command lines and text files.
+ * The whole string must be the number; range is checked; the message names `what`. */
+#ifndef ND_PARSE_H
+#define ND_PARSE_H
+
+#include <stdint.h>
+
+/* Parse a finite double in [lo, hi]. Return 0, or -1 with a message. */
+int nd_parse_double(const char *s, const char *what, double lo, double hi, double *out,
+                    char *err, int errlen);
+
+/* Parse a decimal integer in [lo, hi]. Return 0, or -1 with a message. */
+int nd_parse_int(const char *s, const char *what, long lo, long hi, int *out, char *err,
+                 int errlen);
+
+/* Parse an unsigned 64-bit decimal integer. Return 0, or -1 with a message. */
+int nd_parse_u64(const char *s, const char *what, uint64_t *out, char *err, int errlen);
+
+#endif
