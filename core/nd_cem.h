@@ -12,21 +12,28 @@
 #include "nd_rng.h"
 
 /* Evaluate n candidates x[i * dim .. i * dim + dim) into cost[i]. Return 0, or
- * non-zero to abort the run. Non-finite costs are treated as +inf. */
+ * non-zero to abort the run. Non-finite costs (-inf and NaN too) are treated as +inf.
+ * The cost must be a function of x alone during one run: kept elites are not
+ * re-evaluated within a run, only in the first iteration of the next one. */
 typedef int (*nd_cem_cost_fn)(void *ctx, const double *x, int n, double *cost);
 
 typedef struct {
   int horizon;        /* steps along which noise may be colored (>= 1) */
   int block;          /* values per step (>= 1); dim = horizon * block */
-  int pop;            /* population of the first iteration (N, Q) */
+  int pop;            /* population of the first iteration (N, Q), >= 2 */
   int iters;          /* iterations per run (C) */
-  double elite_frac;  /* elite fraction rho in (0, 1] */
-  double keep_frac;   /* fraction of elites carried into the next iteration (iCEM); 0 = none */
-  double pop_decay;   /* iCEM gamma >= 1: population of iteration i is pop * gamma^-i */
+  double elite_frac;  /* elite fraction rho in (0, 1]: round(rho * pop) >= 1 elites, fixed */
+  double keep_frac;   /* fraction of elites carried into the next iteration and run (iCEM),
+                         at least one when > 0; 0 = none */
+  double pop_decay;   /* iCEM gamma >= 1: iteration i samples floor(pop * gamma^-i) fresh
+                         candidates, but at least min(pop, 2 * elites) */
   double momentum;    /* alpha in [0, 1): new = alpha * old + (1 - alpha) * elite stats */
-  double noise_beta;  /* colored-noise exponent (0 white, 2 ~ iCEM's default) */
+  double noise_beta;  /* colored-noise exponent >= 0 (0 white, 2 ~ iCEM's default); the
+                         noise is periodic over the horizon like iCEM's reference generator,
+                         and has no effect for horizon <= 2 (one frequency only) */
   double std_min;     /* floor of every std after an update */
-  const double *lower; /* per-dim bounds (dim values) or NULL for none; samples clipped */
+  const double *lower; /* per-dim bounds (dim values) or NULL for none (each side on its
+                          own); samples, mean and shifted elites are clipped */
   const double *upper;
   int inject_mean;    /* evaluate the mean as a candidate in the last iteration */
 } nd_cem_cfg;
@@ -36,20 +43,23 @@ void nd_cem_cfg_default(nd_cem_cfg *cfg, int horizon, int block, int pop, int it
 
 typedef struct nd_cem nd_cem;
 
-/* Allocate an optimiser for cfg (bounds are copied). NULL and a message if cfg is invalid. */
+/* Allocate an optimiser for cfg (bounds are copied). NULL and a message if cfg is invalid.
+ * The distribution starts at mean 0 (clipped into the bounds), std 1. */
 nd_cem *nd_cem_create(const nd_cem_cfg *cfg, char *err, int errlen);
 void nd_cem_free(nd_cem *cem);
 
-/* Set the sampling distribution (dim values each) and forget kept elites. */
+/* Set the sampling distribution (dim values each; mean clipped) and forget kept elites. */
 void nd_cem_set_dist(nd_cem *cem, const double *mean, const double *std);
 
-/* Warm start for the next run: shift mean and kept elites `steps` steps earlier along
- * the horizon, fill the freed tail with its last step, and reset std to std_init. */
+/* Warm start for the next run: shift mean and kept elites `steps` >= 0 steps earlier
+ * along the horizon, fill the freed tail with its last step, and reset std to std_init
+ * (NULL keeps std). */
 void nd_cem_shift(nd_cem *cem, int steps, const double *std_init);
 
 /* Run cfg.iters iterations from the current distribution with generator r (all sampling
  * happens on the calling thread, so results do not depend on how costs are spread).
- * Return 0, or the callback's non-zero code. */
+ * One callback per iteration. Return 0, or the callback's non-zero code at once (the
+ * distribution then holds the last completed iteration's update). */
 int nd_cem_run(nd_cem *cem, nd_rng *r, nd_cem_cost_fn fn, void *ctx);
 
 int nd_cem_dim(const nd_cem *cem);
@@ -61,5 +71,7 @@ double nd_cem_best_cost(const nd_cem *cem);         /* its cost */
 double nd_cem_iter_best(const nd_cem *cem, int i);
 /* Number of cost evaluations in the last run. */
 int nd_cem_evals(const nd_cem *cem);
+/* Largest n the cost callback can be given: pop + kept elites + injected mean. */
+int nd_cem_max_batch(const nd_cem *cem);
 
 #endif
