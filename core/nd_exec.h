@@ -1,0 +1,105 @@
+/* nd_exec: the executor's trajectory logic, on plain arrays (no LCM, no clock).
+ *
+ * The executor commands one planar trajectory that is continuous in position,
+ * velocity, acceleration and jerk for all time. It is made of at most three pieces:
+ *
+ *   tracking segment  min-snap segment toward the newest plan's first keypoint,
+ *                     started at the plan's arrival time from the trajectory's state
+ *                     at that instant;
+ *   brake segment     min-snap segment from a state on the tracking segment to rest
+ *                     (v = a = j = 0); it departs at the tracking segment's end, or
+ *                     earlier when the inputs go stale;
+ *   hold              rest at the brake's end position, exactly still.
+ *
+ * Every piece is checked in continuous time against the speed, acceleration and jerk
+ * limits before it is committed (a sampled maximum plus a rigorous bound on what lies
+ * between samples), so no time at which the executor is later asked can give a
+ * setpoint beyond the limits. A request that cannot be met within the limits is
+ * rejected and the committed trajectory is left unchanged. The bound costs 1-2% of
+ * conservatism, so a speed exactly at v_max cannot be certified: keypoint speeds within
+ * ~0.1% of v_max are refused (ND_EXEC_ELIMIT), and emitted speeds stay just below it.
+ *
+ * Times are seconds on one monotonic clock (the caller's); positions metres. */
+#ifndef ND_EXEC_H
+#define ND_EXEC_H
+
+#include "nd_snap.h"
+
+/* Limits and search settings; constant while the executor runs, and must pass
+ * nd_exec_cfg_check (the other functions trust it). */
+typedef struct {
+  double v_max;        /* bound on planar speed |v|, m/s (Panda Cartesian: 1.7) */
+  double a_max;        /* bound on |a|, m/s^2 (Panda: 13) */
+  double j_max;        /* bound on |j|, m/s^3 (Panda: 6500) */
+  double t_min;        /* shortest segment, s; shorter requests start the search here */
+  double t_max;        /* longest tracking or brake segment, s; beyond it: rejected */
+  double stretch;      /* factor (> 1) by which a segment's duration grows per try */
+  int    n_check;      /* samples per limit check (>= 2) */
+} nd_exec_cfg;
+
+/* Modes, as in nudge_ee_cmd_t.mode. */
+enum {
+  ND_EXEC_TRACK = 0,   /* on the tracking segment; a brake to rest follows its end */
+  ND_EXEC_STOPPING,    /* committed to rest: on the brake (or still before its departure) */
+  ND_EXEC_HOLD         /* at rest, setpoint constant */
+};
+
+/* Return codes. */
+enum {
+  ND_EXEC_OK = 0,
+  ND_EXEC_EINVAL = -1, /* non-finite input or T <= 0 */
+  ND_EXEC_ELIMIT = -2  /* no duration up to t_max keeps the segment within the limits */
+};
+
+/* Mutable state; one per executor, plain data (copyable). Read-only for callers. */
+typedef struct {
+  int mode;            /* ND_EXEC_TRACK / _STOPPING / _HOLD */
+  double t_last;       /* latest time passed to step or plan; time never goes back */
+  double sp[2][4];     /* last setpoint from nd_exec_step, [axis][p, v, a, j] */
+  nd_snap_seg seg;     /* tracking segment; seg.T is the duration actually used */
+  double t_seg;        /* its start time */
+  nd_snap_seg brake;   /* brake to rest, departing from seg at t_brake */
+  double t_brake;      /* departure time of the brake (<= t_seg + seg.T) */
+  double hold[2];      /* rest position: end of the brake */
+} nd_exec;
+
+/* Defaults: Panda Cartesian limits 1.7 m/s, 13 m/s^2, 6500 m/s^3; t_min 0.01 s,
+ * t_max 2 s, stretch 1.1, n_check 64. */
+nd_exec_cfg nd_exec_cfg_default(void);
+
+/* Check cfg (finite positive limits, t_min < t_max, stretch > 1, n_check >= 2).
+ * Returns ND_EXEC_OK or ND_EXEC_EINVAL with a message in err. */
+int nd_exec_cfg_check(const nd_exec_cfg *cfg, char *err, int errlen);
+
+/* Start at rest, holding position p[2] (e.g. the measured end-effector) at time now. */
+void nd_exec_init(nd_exec *ex, const double p[2], double now);
+
+/* Commit a new tracking segment toward key = (x, y, vx, vy) with requested duration T,
+ * starting at now from the trajectory's state at now (p, v, a, j: continuous); a now
+ * before the last call counts as the last call's time. T is
+ * stretched (by cfg->stretch steps, from at least t_min) until the segment and its
+ * brake to rest at the end stay within the limits. Returns ND_EXEC_OK (mode TRACK,
+ * ex->seg.T the duration used), or a negative code with a message in err and ex
+ * unchanged. O(log(t_max / T) * n_check). */
+int nd_exec_plan(nd_exec *ex, const nd_exec_cfg *cfg, double now, const double key[4],
+                 double T, char *err, int errlen);
+
+/* Setpoint at time now into out[axis][p, v, a, j]; returns the mode. If stale is
+ * nonzero in mode TRACK, commits to stopping: of a few candidate brake departures from
+ * now to the segment's end (usually now wins), the one reaching rest first within the
+ * limits; rest is reached at the latest when the brake planned at the end would. A non-finite now or one before the last call is treated as the
+ * last call's time. No allocation; O(1) except the one brake search when going stale. */
+int nd_exec_step(nd_exec *ex, const nd_exec_cfg *cfg, double now, int stale,
+                 double out[2][4]);
+
+/* State of the committed trajectory at time t >= ex->t_last, without changing ex. */
+void nd_exec_eval(const nd_exec *ex, double t, double out[2][4]);
+
+/* Bounds over [0, seg->T] of speed, |acceleration| and |jerk| (max[0..2]) from n
+ * samples plus a rigorous bound on the excursion between them. */
+void nd_exec_seg_bounds(const nd_snap_seg *seg, int n, double max[3]);
+
+/* Name of a mode ("tracking", "stopping", "holding"). */
+const char *nd_exec_mode_name(int mode);
+
+#endif
