@@ -1,1 +1,337 @@
-/* placeholder */
+/* nds_model: the pushing scene's MJCF, loading it, and applying theta. */
+#include "nds_model.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Default of the simulation study: MuJoCo's default friction and a 1 kg sphere. */
+const double nds_theta_true[NDS_NTHETA] = {1.0, 0.005, 0.0001, 1.0};
+
+/* The sphere floats this far above the table: it never touches it (contact excluded),
+ * the gap only keeps the two apart when drawn. */
+#define NDS_EE_GAP 0.001
+
+/* Where the sphere starts in the generated scene (qpos0), clear of the object at the
+ * origin, so qpos0 is a valid non-penetrating configuration for mj_setConst. */
+#define NDS_EE_X0 (-0.3)
+
+/* Solver settings of the generated scene. Newton converges in a few iterations on a
+ * handful of contacts; the cap only matters when it does not, where more iterations buy
+ * nothing a 20 Hz re-plan needs. The elliptic cone makes torsional and rolling friction
+ * the physical cone of theta rather than its pyramid approximation: it costs ~40% more
+ * per step than pyramidal, and the two disagree by ~1 cm / 0.1 rad on a 10 cm push.
+ * No noslip: it would add a second solver pass for a drift the soft contacts tolerate. */
+#define NDS_ITERATIONS 20
+#define NDS_TOLERANCE 1e-8
+
+/* Box-on-plane gives at most 4 contacts and the sphere 1 more; the default sizes (100
+ * contacts, 500 rows, ~10 MB of stack) would make every per-worker mjData ~13 MB instead
+ * of ~1.3 MB. A full
+ * contact list shows up as a MuJoCo warning, which rollouts report as divergence; the
+ * stack (an overflow is a fatal mju_error) keeps ~150x the ~600 mjtNums a push uses. */
+#define NDS_NCONMAX 32
+#define NDS_NSTACK 100000
+
+static const char *theta_name[NDS_NTHETA] = {"sliding friction", "torsional friction",
+                                             "rolling friction", "sphere mass"};
+
+void nds_scene_cfg_default(nds_scene_cfg *cfg) {
+  cfg->obj_half[0] = 0.05;
+  cfg->obj_half[1] = 0.03;
+  cfg->obj_half[2] = 0.025;
+  cfg->obj_mass = 0.5;
+  cfg->ee_radius = 0.025;
+  cfg->timestep = 0.001;
+  cfg->condim = 6;
+  cfg->tilt_damping = 0.1;
+  memcpy(cfg->theta, nds_theta_true, sizeof(cfg->theta));
+}
+
+int nds_theta_check(const double theta[NDS_NTHETA], char *err, int errlen) {
+  for (int i = 0; i < NDS_NTHETA; i++) {
+    double v = theta[i];
+    int bad = !isfinite(v) || (i == NDS_TH_MASS ? v <= 0 : v < 0);
+    if (bad) {
+      snprintf(err, errlen, "theta[%d] (%s) = %g: must be finite and %s", i, theta_name[i],
+               v, i == NDS_TH_MASS ? "> 0" : ">= 0");
+      return -1;
+    }
+  }
+  return 0;
+}
+
+static int positive(double v) { return isfinite(v) && v > 0; }
+
+int nds_scene_cfg_check(const nds_scene_cfg *cfg, char *err, int errlen) {
+  for (int i = 0; i < 3; i++) {
+    if (!positive(cfg->obj_half[i])) {
+      snprintf(err, errlen, "scene: obj_half[%d] = %g: must be finite and > 0", i,
+               cfg->obj_half[i]);
+      return -1;
+    }
+  }
+  if (!positive(cfg->obj_mass)) {
+    snprintf(err, errlen, "scene: obj_mass = %g: must be finite and > 0", cfg->obj_mass);
+    return -1;
+  }
+  if (!positive(cfg->ee_radius)) {
+    snprintf(err, errlen, "scene: ee_radius = %g: must be finite and > 0", cfg->ee_radius);
+    return -1;
+  }
+  if (!(positive(cfg->timestep) && cfg->timestep <= 0.05)) {
+    snprintf(err, errlen, "scene: timestep = %g: must be in (0, 0.05] s", cfg->timestep);
+    return -1;
+  }
+  if (cfg->condim != 3 && cfg->condim != 4 && cfg->condim != 6) {
+    snprintf(err, errlen, "scene: condim = %d: must be 3, 4 or 6", cfg->condim);
+    return -1;
+  }
+  if (!(isfinite(cfg->tilt_damping) && cfg->tilt_damping >= 0)) {
+    snprintf(err, errlen, "scene: tilt_damping = %g: must be finite and >= 0",
+             cfg->tilt_damping);
+    return -1;
+  }
+  /* The sphere pushes the box only if its centre is below the box's top face. */
+  if (cfg->ee_radius + NDS_EE_GAP >= 2 * cfg->obj_half[2]) {
+    snprintf(err, errlen,
+             "scene: ee_radius = %g: sphere centre (%g m) must be below the object top "
+             "(%g m)",
+             cfg->ee_radius, cfg->ee_radius + NDS_EE_GAP, 2 * cfg->obj_half[2]);
+    return -1;
+  }
+  return nds_theta_check(cfg->theta, err, errlen);
+}
+
+int nds_scene_xml(const nds_scene_cfg *cfg, char *buf, int len, char *err, int errlen) {
+  if (nds_scene_cfg_check(cfg, err, errlen)) return -1;
+  const double *h = cfg->obj_half, *th = cfg->theta;
+  double m = cfg->obj_mass;
+  /* Uniform solid box: I = m/3 (b^2 + c^2) in half sizes. */
+  double ix = m / 3 * (h[1] * h[1] + h[2] * h[2]);
+  double iy = m / 3 * (h[0] * h[0] + h[2] * h[2]);
+  double iz = m / 3 * (h[0] * h[0] + h[1] * h[1]);
+  double ee_z = cfg->ee_radius + NDS_EE_GAP;
+  int n = snprintf(
+      buf, len,
+      "<mujoco model=\"nudge_push\">\n"
+      "  <compiler angle=\"radian\"/>\n"
+      "  <option timestep=\"%.17g\" integrator=\"Euler\" cone=\"elliptic\" "
+      "solver=\"Newton\" iterations=\"%d\" tolerance=\"%g\" noslip_iterations=\"0\"/>\n"
+      "  <size nconmax=\"%d\" njmax=\"%d\" nstack=\"%d\"/>\n"
+      "  <default>\n"
+      "    <geom condim=\"%d\" friction=\"%.17g %.17g %.17g\"/>\n"
+      "  </default>\n"
+      "  <worldbody>\n"
+      "    <geom name=\"table\" type=\"plane\" size=\"1 1 0.05\"/>\n"
+      "    <body name=\"object\" pos=\"0 0 %.17g\">\n"
+      "      <freejoint name=\"object\"/>\n"
+      "      <inertial pos=\"0 0 0\" mass=\"%.17g\" diaginertia=\"%.17g %.17g %.17g\"/>\n"
+      "      <geom name=\"object\" type=\"box\" size=\"%.17g %.17g %.17g\"/>\n"
+      "    </body>\n"
+      "    <body name=\"ee\" pos=\"%.17g 0 %.17g\">\n"
+      "      <joint name=\"ee_x\" type=\"slide\" axis=\"1 0 0\" ref=\"%.17g\"/>\n"
+      "      <joint name=\"ee_y\" type=\"slide\" axis=\"0 1 0\"/>\n"
+      "      <geom name=\"ee\" type=\"sphere\" size=\"%.17g\" mass=\"%.17g\"/>\n"
+      "    </body>\n"
+      "  </worldbody>\n"
+      "  <contact>\n"
+      "    <exclude body1=\"world\" body2=\"ee\"/>\n"
+      "  </contact>\n"
+      "</mujoco>\n",
+      cfg->timestep, NDS_ITERATIONS, NDS_TOLERANCE,                       /* option */
+      NDS_NCONMAX, NDS_NCONMAX * 6, NDS_NSTACK,                           /* size */
+      cfg->condim, th[NDS_TH_SLIDE], th[NDS_TH_TORSION], th[NDS_TH_ROLL], /* default */
+      h[2], m, ix, iy, iz, h[0], h[1], h[2],                              /* object */
+      NDS_EE_X0, ee_z, NDS_EE_X0, cfg->ee_radius, th[NDS_TH_MASS]);       /* ee */
+  if (n < 0 || n >= len) {
+    snprintf(err, errlen, "scene: XML needs %d bytes, buffer has %d", n + 1, len);
+    return -1;
+  }
+  return 0;
+}
+
+/* Find the bodies and joints the rest of sim/ indexes, checking the structure it relies
+ * on. `what` names the model's origin in messages. */
+static int resolve(nds_model *nm, const char *what, char *err, int errlen) {
+  const mjModel *m = nm->m;
+  nm->obj_body = mj_name2id(m, mjOBJ_BODY, "object");
+  nm->ee_body = mj_name2id(m, mjOBJ_BODY, "ee");
+  if (nm->obj_body < 0 || nm->ee_body < 0) {
+    snprintf(err, errlen, "%s: no body named \"%s\"", what,
+             nm->obj_body < 0 ? "object" : "ee");
+    return -1;
+  }
+  int oj = m->body_jntadr[nm->obj_body];
+  if (m->body_jntnum[nm->obj_body] != 1 || m->jnt_type[oj] != mjJNT_FREE) {
+    snprintf(err, errlen, "%s: body \"object\" needs exactly one joint, a free joint", what);
+    return -1;
+  }
+  nm->obj_qpos = m->jnt_qposadr[oj];
+  nm->obj_dof = m->jnt_dofadr[oj];
+  if (m->body_parentid[nm->ee_body] != 0) {
+    snprintf(err, errlen, "%s: body \"ee\" must be a child of the world body", what);
+    return -1;
+  }
+  static const char *jname[2] = {"ee_x", "ee_y"};
+  for (int k = 0; k < 2; k++) {
+    int j = mj_name2id(m, mjOBJ_JOINT, jname[k]);
+    if (j < 0) {
+      snprintf(err, errlen, "%s: no joint named \"%s\"", what, jname[k]);
+      return -1;
+    }
+    const mjtNum *ax = m->jnt_axis + 3 * j;
+    if (m->jnt_type[j] != mjJNT_SLIDE || m->jnt_bodyid[j] != nm->ee_body ||
+        fabs(ax[k] - 1) > 1e-9 || fabs(ax[1 - k]) > 1e-9 || fabs(ax[2]) > 1e-9) {
+      snprintf(err, errlen, "%s: joint \"%s\" must be a slide joint of body \"ee\" along %c",
+               what, jname[k], "xy"[k]);
+      return -1;
+    }
+    nm->ee_qpos[k] = m->jnt_qposadr[j];
+    nm->ee_dof[k] = m->jnt_dofadr[j];
+  }
+  if (m->body_jntnum[nm->ee_body] != 2) {
+    snprintf(err, errlen, "%s: body \"ee\" must have only the joints ee_x and ee_y", what);
+    return -1;
+  }
+  /* nds_theta_apply relies on the sphere's dofs moving its mass alone. */
+  for (int b = 0; b < m->nbody; b++) {
+    if (m->body_parentid[b] == nm->ee_body && b != nm->ee_body) {
+      snprintf(err, errlen, "%s: body \"ee\" must have no child bodies", what);
+      return -1;
+    }
+  }
+  if (m->dof_armature[nm->ee_dof[0]] != 0 || m->dof_armature[nm->ee_dof[1]] != 0) {
+    snprintf(err, errlen, "%s: joints ee_x, ee_y must have no armature", what);
+    return -1;
+  }
+  nm->ee_height = m->body_pos[3 * nm->ee_body + 2];
+  return 0;
+}
+
+int nds_model_init(nds_model *nm, const nds_scene_cfg *cfg, char *err, int errlen) {
+  memset(nm, 0, sizeof(*nm));
+  char xml[4096];
+  if (nds_scene_xml(cfg, xml, sizeof(xml), err, errlen)) return -1;
+
+  /* The VFS holds mjMAXVFS file names inline (~2 MB): too big for the stack. */
+  mjVFS *vfs = malloc(sizeof(mjVFS));
+  if (!vfs) {
+    snprintf(err, errlen, "scene: out of memory for the VFS");
+    return -1;
+  }
+  mj_defaultVFS(vfs);
+  static const char fname[] = "nudge_scene.xml";
+  int len = (int)strlen(xml);
+  if (mj_makeEmptyFileVFS(vfs, fname, len)) {
+    snprintf(err, errlen, "scene: cannot add %s to the VFS", fname);
+    free(vfs);
+    return -1;
+  }
+  memcpy(vfs->filedata[mj_findFileVFS(vfs, fname)], xml, len);
+  char lerr[512] = "";
+  nm->m = mj_loadXML(fname, vfs, lerr, sizeof(lerr));
+  mj_deleteVFS(vfs);
+  free(vfs);
+  if (!nm->m) {
+    snprintf(err, errlen, "scene: MuJoCo rejected the generated MJCF: %s", lerr);
+    return -1;
+  }
+  nm->cfg = *cfg;
+  if (resolve(nm, "scene", err, errlen) || nds_theta_apply(nm, cfg->theta, err, errlen)) {
+    nds_model_free(nm);
+    return -1;
+  }
+  /* Free-joint angular velocity is in the body frame: dofs 3 and 4 are roll and pitch
+   * while the box is upright, dof 5 its yaw, which stays undamped. */
+  nm->m->dof_damping[nm->obj_dof + 3] = cfg->tilt_damping;
+  nm->m->dof_damping[nm->obj_dof + 4] = cfg->tilt_damping;
+  return 0;
+}
+
+int nds_model_load_file(nds_model *nm, const char *path, const nds_scene_cfg *cfg,
+                        char *err, int errlen) {
+  memset(nm, 0, sizeof(*nm));
+  if (nds_theta_check(cfg->theta, err, errlen)) return -1;
+  char lerr[512] = "";
+  nm->m = mj_loadXML(path, NULL, lerr, sizeof(lerr));
+  if (!nm->m) {
+    snprintf(err, errlen, "%s: %s", path, lerr[0] ? lerr : "cannot load");
+    return -1;
+  }
+  if (resolve(nm, path, err, errlen)) {
+    nds_model_free(nm);
+    return -1;
+  }
+  /* cfg records what the file describes, where it says it, so state helpers (e.g. the
+   * resting height) follow the file rather than the defaults. */
+  const mjModel *m = nm->m;
+  nm->cfg = *cfg;
+  nm->cfg.timestep = m->opt.timestep;
+  nm->cfg.obj_mass = m->body_mass[nm->obj_body];
+  nm->cfg.tilt_damping = m->dof_damping[nm->obj_dof + 3];
+  for (int g = 0; g < m->ngeom; g++) {
+    if (m->geom_bodyid[g] == nm->obj_body && m->geom_type[g] == mjGEOM_BOX) {
+      memcpy(nm->cfg.obj_half, m->geom_size + 3 * g, sizeof(nm->cfg.obj_half));
+      nm->cfg.condim = m->geom_condim[g];
+    }
+    if (m->geom_bodyid[g] == nm->ee_body && m->geom_type[g] == mjGEOM_SPHERE)
+      nm->cfg.ee_radius = m->geom_size[3 * g];
+  }
+  if (nds_theta_apply(nm, cfg->theta, err, errlen)) {
+    nds_model_free(nm);
+    return -1;
+  }
+  return 0;
+}
+
+int nds_model_copy(nds_model *dst, const nds_model *src, char *err, int errlen) {
+  *dst = *src;
+  dst->m = mj_copyModel(NULL, src->m);
+  if (!dst->m) {
+    snprintf(err, errlen, "model copy: out of memory");
+    return -1;
+  }
+  return 0;
+}
+
+void nds_model_free(nds_model *nm) {
+  if (nm->m) mj_deleteModel(nm->m);
+  nm->m = NULL;
+}
+
+int nds_theta_apply(nds_model *nm, const double theta[NDS_NTHETA], char *err, int errlen) {
+  if (nds_theta_check(theta, err, errlen)) return -1;
+  mjModel *m = nm->m;
+
+  /* Every geom gets theta: contacts combine friction by maximum, so each contact sees
+   * theta exactly whichever pair it joins. */
+  for (int g = 0; g < m->ngeom; g++) {
+    m->geom_friction[3 * g + 0] = theta[NDS_TH_SLIDE];
+    m->geom_friction[3 * g + 1] = theta[NDS_TH_TORSION];
+    m->geom_friction[3 * g + 2] = theta[NDS_TH_ROLL];
+  }
+
+  int b = nm->ee_body;
+  double s = theta[NDS_TH_MASS] / m->body_mass[b];
+  m->body_mass[b] = theta[NDS_TH_MASS];
+  for (int k = 0; k < 3; k++) m->body_inertia[3 * b + k] *= s;
+
+  /* What mj_setConst derives from the masses, updated without an mjData: the subtree
+   * masses (mj_comPos divides by them) and the inverse weights that scale contact
+   * softness. The sphere's two slide dofs carry only its own mass (resolve checks: a
+   * leaf body, no armature), so its inverse weights are exactly proportional to 1/mass. */
+  for (int i = 0; i < m->nbody; i++) m->body_subtreemass[i] = m->body_mass[i];
+  for (int i = m->nbody - 1; i > 0; i--)
+    m->body_subtreemass[m->body_parentid[i]] += m->body_subtreemass[i];
+  m->body_invweight0[2 * b + 0] /= s;
+  m->body_invweight0[2 * b + 1] /= s;
+  for (int k = 0; k < 2; k++) {
+    m->dof_invweight0[nm->ee_dof[k]] /= s;
+    m->dof_M0[nm->ee_dof[k]] *= s;
+  }
+
+  memcpy(nm->cfg.theta, theta, sizeof(nm->cfg.theta));
+  return 0;
+}

@@ -21,10 +21,14 @@ typedef struct {
   double ee_radius;      /* m */
   double timestep;       /* s */
   int condim;            /* 3, 4 or 6: torsional needs >= 4, rolling needs 6 */
+  double tilt_damping;   /* N m s/rad on the object's roll and pitch dofs only (>= 0) */
   double theta[NDS_NTHETA];
 } nds_scene_cfg;
 
-/* Defaults: 10 x 6 x 5 cm, 0.5 kg box; 2.5 cm sphere; 1 ms; condim 6; nds_theta_true. */
+/* Defaults: 10 x 6 x 5 cm, 0.5 kg box; 2.5 cm sphere; 1 ms; condim 6; tilt damping 0.1;
+ * nds_theta_true. The tilt damping keeps a sliding box from rocking on its soft corner
+ * contacts at coarse timesteps (MuJoCo's Euler integrates it implicitly); it leaves yaw
+ * and translation free, and a box that stays flat, as a pushed box does, never feels it. */
 void nds_scene_cfg_default(nds_scene_cfg *cfg);
 
 typedef struct {
@@ -36,14 +40,22 @@ typedef struct {
   double ee_height;       /* z of the sphere centre */
 } nds_model;
 
+/* Check cfg: finite positive sizes and masses, timestep in (0, 0.05] s, condim 3, 4 or 6,
+ * the sphere centre below the object top, theta valid. Return 0, or -1 naming the value. */
+int nds_scene_cfg_check(const nds_scene_cfg *cfg, char *err, int errlen);
+
 /* Write the scene's MJCF for cfg into buf. Return 0, or -1 with a message. */
 int nds_scene_xml(const nds_scene_cfg *cfg, char *buf, int len, char *err, int errlen);
 
-/* Build the model of cfg (validated, theta applied). Return 0, or -1 with a message. */
+/* Build the model of cfg (validated, theta applied; tilt_damping is set on the model after
+ * loading, since MJCF damps all six dofs of a free joint alike). Return 0, or -1 with a
+ * message. */
 int nds_model_init(nds_model *nm, const nds_scene_cfg *cfg, char *err, int errlen);
 
 /* Load a user MJCF file that has bodies "object" (free joint) and "ee" (slide joints
- * "ee_x", "ee_y"); theta from cfg is applied. Return 0, or -1 naming the file. */
+ * "ee_x", "ee_y"); theta from cfg is applied, everything else is the file's (nm->cfg
+ * records the file's timestep, box size, sphere radius, condim). Return 0, or -1 naming
+ * the file and what is missing. */
 int nds_model_load_file(nds_model *nm, const char *path, const nds_scene_cfg *cfg,
                         char *err, int errlen);
 

@@ -1,1 +1,208 @@
-/* placeholder */
+/* nds_planner: iCEM over keypoint sequences with batched MuJoCo rollouts. */
+#include "nds_planner.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "nd_math.h"
+
+struct nds_planner {
+  nds_planner_cfg cfg;
+  nds_batch *batch;
+  nd_cem *cem;
+  nd_rng rng;
+  int dim;
+  int cap;                   /* capacity of outs: nd_cem_max_batch */
+  nds_rollout_out *outs;
+  double *lower, *upper, *std0;
+  int warm;                  /* the cem holds the previous plan's distribution */
+  /* inputs of the plan in progress, read by the cost callback */
+  const nds_state *s;
+  const double (*sp0)[4];
+  const nd_goal *goal;
+};
+
+void nds_planner_cfg_default(nds_planner_cfg *cfg) {
+  memset(cfg, 0, sizeof(*cfg));
+  cfg->pop = 128;
+  cfg->iters = 4;
+  cfg->M = 2;
+  cfg->T = 0.3;
+  cfg->elite_frac = 0.2;
+  /* iCEM's recommended settings; with M = 2 the horizon is too short for colored noise
+   * to mean anything, so it stays white. */
+  cfg->keep_frac = 0.3;
+  cfg->pop_decay = 1.25;
+  cfg->momentum = 0.1;
+  cfg->noise_beta = 0.0;
+  cfg->std_init[0] = cfg->std_init[1] = 0.08;
+  cfg->std_init[2] = cfg->std_init[3] = 0.25;
+  cfg->std_min = 1e-3;
+  cfg->ws_lo[0] = cfg->ws_lo[1] = -0.5;
+  cfg->ws_hi[0] = cfg->ws_hi[1] = 0.5;
+  cfg->key_v_max = 1.0;
+  /* Panda Cartesian limits (NOTES.md) with margin, so the executor never has to clip. */
+  cfg->v_max = 1.5;
+  cfg->a_max = 10.0;
+  cfg->limit_penalty = 10.0;
+  cfg->w = nd_cost_weights_default();
+  nds_ctrl_cfg_default(&cfg->ctrl);
+  cfg->seed = 1;
+}
+
+static int plan_cost(void *ctx, const double *x, int n, double *cost) {
+  nds_planner *p = ctx;
+  const nds_planner_cfg *c = &p->cfg;
+  if (n > p->cap) return -1;
+  nds_batch_rollouts(p->batch, &c->ctrl, p->s, p->sp0, x, n, c->M, c->T, p->outs);
+  for (int i = 0; i < n; i++) {
+    const nds_rollout_out *o = &p->outs[i];
+    if (o->diverged) {
+      cost[i] = INFINITY;
+      continue;
+    }
+    double e = nd_cost_plan(&c->w, p->goal, o->obj_xy, o->obj_yaw, o->ee_xy, o->acc_sq_mean);
+    /* A step penalty plus the relative excess ranks every candidate the robot could not
+     * execute behind every one it could (task costs are far below limit_penalty). */
+    double ex = fmax(0.0, o->v_peak / c->v_max - 1.0) + fmax(0.0, o->a_peak / c->a_max - 1.0);
+    if (ex > 0.0) e += c->limit_penalty * (1.0 + ex);
+    cost[i] = e;
+  }
+  return 0;
+}
+
+nds_planner *nds_planner_create(const nds_model *model, const nds_planner_cfg *cfg,
+                                nd_pool *pool, char *err, int errlen) {
+  if (cfg->M < 1 || cfg->M > NDS_MAX_KEYS || !(cfg->T > 0.0) || cfg->pop < 2 || cfg->iters < 1) {
+    snprintf(err, errlen, "planner: need 1 <= M <= %d, T > 0, pop >= 2, iters >= 1 (got M %d, "
+             "T %g, pop %d, iters %d)", NDS_MAX_KEYS, cfg->M, cfg->T, cfg->pop, cfg->iters);
+    return NULL;
+  }
+  if (!(cfg->v_max > 0.0) || !(cfg->a_max > 0.0)) {
+    snprintf(err, errlen, "planner: limits must be positive (v_max %g, a_max %g)", cfg->v_max,
+             cfg->a_max);
+    return NULL;
+  }
+  nds_planner *p = calloc(1, sizeof(*p));
+  if (!p) {
+    snprintf(err, errlen, "planner: out of memory");
+    return NULL;
+  }
+  p->cfg = *cfg;
+  p->dim = cfg->M * 4;
+  p->lower = calloc(3 * p->dim, sizeof(double));
+  if (!p->lower) {
+    snprintf(err, errlen, "planner: out of memory");
+    nds_planner_free(p);
+    return NULL;
+  }
+  p->upper = p->lower + p->dim;
+  p->std0 = p->upper + p->dim;
+  for (int k = 0; k < cfg->M; k++) {
+    double *lo = p->lower + 4 * k, *hi = p->upper + 4 * k;
+    lo[0] = cfg->ws_lo[0], hi[0] = cfg->ws_hi[0];
+    lo[1] = cfg->ws_lo[1], hi[1] = cfg->ws_hi[1];
+    lo[2] = lo[3] = -cfg->key_v_max;
+    hi[2] = hi[3] = cfg->key_v_max;
+    memcpy(p->std0 + 4 * k, cfg->std_init, 4 * sizeof(double));
+  }
+  nd_cem_cfg cc;
+  nd_cem_cfg_default(&cc, cfg->M, 4, cfg->pop, cfg->iters);
+  cc.elite_frac = cfg->elite_frac;
+  cc.keep_frac = cfg->keep_frac;
+  cc.pop_decay = cfg->pop_decay;
+  cc.momentum = cfg->momentum;
+  cc.noise_beta = cfg->noise_beta;
+  cc.std_min = cfg->std_min;
+  cc.lower = p->lower;
+  cc.upper = p->upper;
+  cc.inject_mean = 1;
+  p->cem = nd_cem_create(&cc, err, errlen);
+  if (!p->cem) {
+    nds_planner_free(p);
+    return NULL;
+  }
+  p->cap = nd_cem_max_batch(p->cem);
+  if (!(p->outs = calloc(p->cap, sizeof(*p->outs)))) {
+    snprintf(err, errlen, "planner: out of memory");
+    nds_planner_free(p);
+    return NULL;
+  }
+  p->batch = nds_batch_create(model, pool, err, errlen);
+  if (!p->batch) {
+    nds_planner_free(p);
+    return NULL;
+  }
+  nd_rng_seed(&p->rng, cfg->seed, 0);
+  return p;
+}
+
+void nds_planner_free(nds_planner *p) {
+  if (!p) return;
+  nds_batch_free(p->batch);
+  nd_cem_free(p->cem);
+  free(p->outs);
+  free(p->lower);
+  free(p);
+}
+
+int nds_planner_set_theta(nds_planner *p, const double theta[NDS_NTHETA], char *err,
+                          int errlen) {
+  return nds_batch_set_theta(p->batch, theta, err, errlen);
+}
+
+const nds_planner_cfg *nds_planner_config(const nds_planner *p) { return &p->cfg; }
+
+void nds_planner_reset(nds_planner *p) { p->warm = 0; }
+
+int nds_planner_plan(nds_planner *p, const nds_state *s, const double sp0[2][4],
+                     const nd_goal *goal, nds_plan *out, char *err, int errlen) {
+  const nds_planner_cfg *c = &p->cfg;
+  const double g[3] = {goal->x, goal->y, goal->yaw};
+  if (!nd_all_finite(&sp0[0][0], 8) || !nd_all_finite(g, 3) ||
+      !nd_all_finite(s->obj_pos, 3) || !nd_all_finite(s->obj_quat, 4) ||
+      !nd_all_finite(s->obj_vel, 6) || !nd_all_finite(s->ee_pos, 2) ||
+      !nd_all_finite(s->ee_vel, 2)) {
+    snprintf(err, errlen, "planner: state, setpoint or goal is not finite");
+    return -1;
+  }
+  if (!p->warm) {
+    /* Cold start: every keypoint at the current setpoint, at rest. The proximity term
+     * draws the samples toward the object from there. */
+    double mean[4 * NDS_MAX_KEYS];
+    for (int k = 0; k < c->M; k++) {
+      mean[4 * k + 0] = sp0[0][0];
+      mean[4 * k + 1] = sp0[1][0];
+      mean[4 * k + 2] = mean[4 * k + 3] = 0.0;
+    }
+    nd_cem_set_dist(p->cem, mean, p->std0);
+    p->warm = 1;
+  } else {
+    /* Re-plans come every 50-100 ms while a segment lasts T = 300 ms: the keypoints of the
+     * previous plan are still ahead, so the mean is kept as it is (no shift) and only the
+     * std is widened again. */
+    nd_cem_shift(p->cem, 0, p->std0);
+  }
+  p->s = s;
+  p->sp0 = sp0;
+  p->goal = goal;
+  int rc = nd_cem_run(p->cem, &p->rng, plan_cost, p);
+  if (rc) {
+    snprintf(err, errlen, "planner: rollout batch larger than %d", p->cap);
+    return -1;
+  }
+  const double *best = nd_cem_best(p->cem);
+  out->M = c->M;
+  out->T = c->T;
+  for (int k = 0; k < c->M; k++) memcpy(out->keys[k], best + 4 * k, 4 * sizeof(double));
+  out->cost = nd_cem_best_cost(p->cem);
+  out->evals = nd_cem_evals(p->cem);
+  /* The predicted task error of the best plan, for logging and for the plan message. */
+  nds_rollout_out o;
+  nds_rollout(nds_batch_model(p->batch, 0), nds_batch_data(p->batch, 0), &c->ctrl, s, sp0,
+              best, c->M, c->T, &o);
+  out->task_error = o.diverged ? INFINITY : nd_task_error(&c->w, goal, o.obj_xy, o.obj_yaw);
+  return 0;
+}

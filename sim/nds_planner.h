@@ -50,6 +50,9 @@ void nds_planner_free(nds_planner *p);
 int nds_planner_set_theta(nds_planner *p, const double theta[NDS_NTHETA], char *err,
                           int errlen);
 
+/* The configuration the planner runs with. */
+const nds_planner_cfg *nds_planner_config(const nds_planner *p);
+
 /* Forget the warm start (call at the start of a task). */
 void nds_planner_reset(nds_planner *p);
 

@@ -1,1 +1,189 @@
-/* placeholder */
+/* nds_rollout: min-snap setpoints -> tracking controller -> mj_step, alone or on a pool. */
+#include "nds_rollout.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "nd_math.h"
+#include "nd_snap.h"
+
+/* MuJoCo counts warnings in d->warning and prints one only when its counter is zero. When
+ * qpos, qvel or qacc go bad it also resets the data (mj_resetData zeroes every counter)
+ * and then counts that warning once more. Starting every counter at this value therefore
+ * makes any warning during the rollout, reset or not, leave some counter != START, and
+ * keeps MuJoCo from printing for rollouts whose divergence we report anyway. */
+#define WARN_START 2
+
+/* A rollout longer than this many steps is an input error, not a plan. */
+#define MAX_STEPS 100000000L
+
+static void fail(nds_rollout_out *out) {
+  memset(out, 0, sizeof(*out));
+  out->diverged = 1;
+}
+
+void nds_rollout(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
+                 const nds_state *s0, const double sp0[2][4], const double *keys, int M,
+                 double T, nds_rollout_out *out) {
+  const mjModel *m = nm->m;
+  char err[64];
+  memset(out, 0, sizeof(*out)); /* padding too, so results compare bytewise */
+  double dt = m->opt.timestep;
+  double steps = round(M * T / dt);
+  if (M < 1 || M > NDS_MAX_KEYS || !(T > 0) || !(steps >= 1 && steps <= MAX_STEPS) ||
+      !nd_all_finite(&sp0[0][0], 8) || !nd_all_finite(keys, 4 * M) ||
+      nds_state_set(nm, d, s0, err, sizeof(err))) {
+    fail(out);
+    return;
+  }
+  long nsteps = (long)steps;
+
+  /* Segment i starts from where segment i-1 ends, so the chain is C3-continuous. */
+  nd_snap_seg seg[NDS_MAX_KEYS];
+  double s[2][4];
+  memcpy(s, sp0, sizeof(s));
+  for (int i = 0; i < M; i++) {
+    const double *k = keys + 4 * i;
+    nd_snap_seg_make(&seg[i], (const double(*)[4])s, k, k + 2, T);
+    nd_snap_seg_eval(&seg[i], T, s);
+  }
+
+  for (int i = 0; i < mjNWARNING; i++) d->warning[i].number = WARN_START;
+  nds_ctrl c;
+  nds_ctrl_reset(&c);
+  double acc_sum = 0, v2_peak = 0, a2_peak = 0;
+  double off[2], pos[2], vel[2], f[2];
+  for (int k = 0; k < 2; k++)
+    off[k] = m->body_pos[3 * nm->ee_body + k] - m->qpos0[nm->ee_qpos[k]];
+
+  int diverged = 0;
+  for (long n = 0; n < nsteps && !diverged; n++) {
+    /* Zero-order hold: the setpoint at the step's start drives the whole step, as the
+     * executor's 1 kHz setpoint does on the robot. Time from the step index, not from
+     * d->time, so long rollouts do not accumulate rounding. */
+    double t = n * dt;
+    int i = (int)(t / T);
+    if (i > M - 1) i = M - 1;
+    nd_snap_seg_eval(&seg[i], t - i * T, s);
+
+    double v2 = s[0][ND_V] * s[0][ND_V] + s[1][ND_V] * s[1][ND_V];
+    double a2 = s[0][ND_A] * s[0][ND_A] + s[1][ND_A] * s[1][ND_A];
+    acc_sum += a2;
+    if (v2 > v2_peak) v2_peak = v2;
+    if (a2 > a2_peak) a2_peak = a2;
+
+    for (int k = 0; k < 2; k++) {
+      pos[k] = d->qpos[nm->ee_qpos[k]] + off[k];
+      vel[k] = d->qvel[nm->ee_dof[k]];
+    }
+    nds_ctrl_pid(ctrl, &c, (const double(*)[4])s, pos, vel, dt, f);
+    d->qfrc_applied[nm->ee_dof[0]] = f[0];
+    d->qfrc_applied[nm->ee_dof[1]] = f[1];
+    mj_step(m, d);
+
+    for (int w = 0; w < mjNWARNING; w++)
+      if (d->warning[w].number != WARN_START) diverged = 1;
+  }
+  if (!diverged && !(nd_all_finite(d->qpos, m->nq) && nd_all_finite(d->qvel, m->nv)))
+    diverged = 1;
+  if (diverged) {
+    fail(out);
+    return;
+  }
+
+  nds_state sf;
+  nds_state_get(nm, d, &sf);
+  out->obj_xy[0] = sf.obj_pos[0];
+  out->obj_xy[1] = sf.obj_pos[1];
+  out->obj_yaw = nds_state_yaw(&sf);
+  out->ee_xy[0] = sf.ee_pos[0];
+  out->ee_xy[1] = sf.ee_pos[1];
+  out->acc_sq_mean = acc_sum / nsteps;
+  out->v_peak = sqrt(v2_peak);
+  out->a_peak = sqrt(a2_peak);
+  out->diverged = 0;
+}
+
+/* ---- batches on the pool ---- */
+
+struct nds_batch {
+  nd_pool *pool;
+  int nworkers;
+  nds_model *models;
+  mjData **data;
+  /* The current call's arguments, read by the tasks. */
+  const nds_ctrl_cfg *ctrl;
+  const nds_state *s0;
+  const double (*sp0)[4];
+  const double *keys;
+  int M;
+  double T;
+  nds_rollout_out *out;
+};
+
+nds_batch *nds_batch_create(const nds_model *proto, nd_pool *pool, char *err, int errlen) {
+  nds_batch *b = calloc(1, sizeof(*b));
+  if (!b) goto oom;
+  b->pool = pool;
+  b->nworkers = nd_pool_size(pool);
+  b->models = calloc(b->nworkers, sizeof(*b->models));
+  b->data = calloc(b->nworkers, sizeof(*b->data));
+  if (!b->models || !b->data) goto oom;
+  for (int w = 0; w < b->nworkers; w++) {
+    if (nds_model_copy(&b->models[w], proto, err, errlen)) {
+      nds_batch_free(b);
+      return NULL;
+    }
+    b->data[w] = mj_makeData(b->models[w].m);
+    if (!b->data[w]) goto oom;
+  }
+  return b;
+oom:
+  snprintf(err, errlen, "batch: out of memory");
+  nds_batch_free(b);
+  return NULL;
+}
+
+void nds_batch_free(nds_batch *b) {
+  if (!b) return;
+  for (int w = 0; w < b->nworkers; w++) {
+    if (b->data && b->data[w]) mj_deleteData(b->data[w]);
+    if (b->models) nds_model_free(&b->models[w]);
+  }
+  free(b->data);
+  free(b->models);
+  free(b);
+}
+
+nd_pool *nds_batch_pool(nds_batch *b) { return b->pool; }
+nds_model *nds_batch_model(nds_batch *b, int worker) { return &b->models[worker]; }
+mjData *nds_batch_data(nds_batch *b, int worker) { return b->data[worker]; }
+
+int nds_batch_set_theta(nds_batch *b, const double theta[NDS_NTHETA], char *err, int errlen) {
+  /* Checked once up front, so no model is left with a different theta than the others. */
+  if (nds_theta_check(theta, err, errlen)) return -1;
+  for (int w = 0; w < b->nworkers; w++)
+    if (nds_theta_apply(&b->models[w], theta, err, errlen)) return -1;
+  return 0;
+}
+
+static void batch_task(void *ctx, int task, int worker) {
+  nds_batch *b = ctx;
+  nds_rollout(&b->models[worker], b->data[worker], b->ctrl, b->s0, b->sp0,
+              b->keys + (size_t)task * 4 * b->M, b->M, b->T, &b->out[task]);
+}
+
+void nds_batch_rollouts(nds_batch *b, const nds_ctrl_cfg *ctrl, const nds_state *s0,
+                        const double sp0[2][4], const double *keys, int n, int M, double T,
+                        nds_rollout_out *out) {
+  b->ctrl = ctrl;
+  b->s0 = s0;
+  b->sp0 = sp0;
+  b->keys = keys;
+  b->M = M;
+  b->T = T;
+  b->out = out;
+  nd_pool_run(b->pool, n, batch_task, b);
+}

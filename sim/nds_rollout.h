@@ -23,8 +23,11 @@ typedef struct {
   int diverged;         /* non-finite state or a MuJoCo instability warning */
 } nds_rollout_out;
 
-/* Run one rollout on d (any prior content). keys holds M * 4 values. Never fails: a
- * divergence is reported in out->diverged with the other fields unspecified. */
+/* Run one rollout on d (any prior content; the result depends only on the arguments).
+ * keys holds M * 4 values; M * T / timestep rounds to the step count. Never fails: bad
+ * input or a divergence (non-finite state, any MuJoCo warning) gives out->diverged = 1
+ * with the other fields zero. d is scratch: its warning counters are preset so MuJoCo
+ * does not print for the divergences reported here. Allocates nothing. */
 void nds_rollout(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
                  const nds_state *s0, const double sp0[2][4], const double *keys, int M,
                  double T, nds_rollout_out *out);

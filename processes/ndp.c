@@ -1,0 +1,122 @@
+/* ndp: shared process plumbing. */
+#include "ndp.h"
+
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/select.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <mujoco/mujoco.h>
+
+#include "nudge/nudge_status_t.h"
+
+volatile sig_atomic_t ndp_quit = 0;
+
+static void on_quit(int sig) {
+  (void)sig;
+  ndp_quit = 1;
+}
+
+void ndp_signals(void) {
+  struct sigaction sa;
+  memset(&sa, 0, sizeof(sa));
+  sa.sa_handler = on_quit;
+  sigemptyset(&sa.sa_mask);
+  sigaction(SIGINT, &sa, NULL);
+  sigaction(SIGTERM, &sa, NULL);
+  signal(SIGPIPE, SIG_IGN);
+}
+
+const char *ndp_url(const char *url) {
+  if (url && *url) return url;
+  const char *env = getenv("LCM_DEFAULT_URL");
+  return env && *env ? env : NDP_DEFAULT_URL;
+}
+
+lcm_t *ndp_lcm_create(const char *url, char *err, int errlen) {
+  url = ndp_url(url);
+  lcm_t *l = lcm_create(url);
+  if (!l)
+    snprintf(err, errlen,
+             "cannot open LCM on '%s'. For udpm URLs this usually means there is no "
+             "multicast route: run 'ip route add 224.0.0.0/4 dev lo' (as root), or set "
+             "--lcm-url / LCM_DEFAULT_URL", url);
+  return l;
+}
+
+int64_t ndp_utime(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return (int64_t)ts.tv_sec * 1000000 + ts.tv_nsec / 1000;
+}
+
+double ndp_mono(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+static const char *mj_prog = "nudge";
+
+static void on_mj_error(const char *msg) {
+  fprintf(stderr, "%s: MuJoCo error: %s\n", mj_prog, msg);
+  exit(1);
+}
+
+static void on_mj_warning(const char *msg) { (void)msg; }
+
+void ndp_mujoco_handlers(const char *prog) {
+  mj_prog = prog;
+  mju_user_error = on_mj_error;
+  mju_user_warning = on_mj_warning;
+}
+
+void ndp_status_init(ndp_status *st, const char *name) {
+  memset(st, 0, sizeof(*st));
+  st->name = name;
+  st->state = "starting";
+  st->t0 = ndp_mono();
+  st->next = st->t0;
+}
+
+int ndp_status_tick(lcm_t *lcm, ndp_status *st, int force) {
+  double now = ndp_mono();
+  if (!force && now < st->next) return 0;
+  st->next = now + 1.0;
+  nudge_status_t m;
+  memset(&m, 0, sizeof(m));
+  m.utime = ndp_utime();
+  m.name = (char *)st->name;
+  m.pid = (int32_t)getpid();
+  m.state = (char *)(st->state ? st->state : "");
+  m.received = st->received;
+  m.published = st->published + 1;  /* counts this heartbeat */
+  m.rejected = st->rejected;
+  if (st->jitter) {
+    m.period_p50_us = (int32_t)nd_jitter_quantile(st->jitter, 0.5);
+    m.period_p99_us = (int32_t)nd_jitter_quantile(st->jitter, 0.99);
+    m.period_max_us = (int32_t)st->jitter->max_us;
+    m.overruns = st->jitter->overruns;
+  }
+  m.uptime = now - st->t0;
+  if (nudge_status_t_publish(lcm, NDP_CH_STATUS, &m) != 0) return -1;
+  st->published++;
+  return 1;
+}
+
+void ndp_drain(lcm_t *lcm) {
+  while (lcm_handle_timeout(lcm, 0) > 0) {
+  }
+}
+
+int ndp_handle(lcm_t *lcm, double timeout_s) {
+  int ms = (int)(timeout_s * 1e3);
+  if (ms < 0) ms = 0;
+  int rc = lcm_handle_timeout(lcm, ms);
+  if (rc < 0 && errno != EINTR) return -1;
+  if (rc > 0) ndp_drain(lcm);
+  return 0;
+}

@@ -1,0 +1,75 @@
+/* ndp: what every nudge process shares: channel names, LCM set-up, clocks, signals,
+ * MuJoCo error handlers and the 1 Hz status heartbeat. */
+#ifndef NDP_H
+#define NDP_H
+
+#include <lcm/lcm.h>
+#include <signal.h>
+#include <stdint.h>
+
+#include "nd_jitter.h"
+
+/* Channels (DESIGN.md sec. 3). */
+#define NDP_CH_MOCAP "MOCAP"
+#define NDP_CH_ROBOT_STATE "ROBOT_STATE"
+#define NDP_CH_EE_CMD "EE_CMD"
+#define NDP_CH_PLAN "PLAN"
+#define NDP_CH_TASK "TASK"
+#define NDP_CH_PARAMS "PARAMS"
+#define NDP_CH_EPISODE "EPISODE"
+#define NDP_CH_STATUS "STATUS"
+
+/* Where nothing leaves the host: ttl=0 multicast on the default LCM group. */
+#define NDP_DEFAULT_URL "udpm://239.255.76.67:7667?ttl=0"
+
+/* Set by SIGINT/SIGTERM once ndp_signals() is installed. */
+extern volatile sig_atomic_t ndp_quit;
+
+/* Install SIGINT/SIGTERM handlers (set ndp_quit, no SA_RESTART so waits return EINTR) and
+ * ignore SIGPIPE. */
+void ndp_signals(void);
+
+/* The URL to use: url if non-NULL, else $LCM_DEFAULT_URL, else NDP_DEFAULT_URL. */
+const char *ndp_url(const char *url);
+
+/* Create an LCM instance on url. NULL with a message that says how to fix the common
+ * cause (no multicast route) on failure. */
+lcm_t *ndp_lcm_create(const char *url, char *err, int errlen);
+
+/* Wall-clock time in microseconds (message utime). */
+int64_t ndp_utime(void);
+
+/* Monotonic time in seconds (loops, timeouts). */
+double ndp_mono(void);
+
+/* Route MuJoCo errors to stderr with the program name and exit(1) (MuJoCo's handler
+ * must not return), and keep MuJoCo warnings off stdout and out of MUJOCO_LOG.TXT:
+ * callers detect instabilities through mjData's warning counters. */
+void ndp_mujoco_handlers(const char *prog);
+
+/* The heartbeat every process publishes on STATUS. Counters are plain fields owned by
+ * the process's main thread; loop statistics come from an optional nd_jitter. */
+typedef struct {
+  const char *name;
+  int64_t received, published, rejected;
+  const char *state;   /* short word: "running", "holding", ... */
+  const nd_jitter *jitter;
+  double t0;           /* ndp_mono() at start */
+  double next;         /* next publication time */
+} ndp_status;
+
+/* Start the heartbeat clock for process name. */
+void ndp_status_init(ndp_status *st, const char *name);
+
+/* Publish STATUS now if a second has passed since the last one (or force). Return 1 if
+ * published, 0 if not due, -1 on a publish error. */
+int ndp_status_tick(lcm_t *lcm, ndp_status *st, int force);
+
+/* Drain every queued message without blocking (LCM's queues drop the newest when full). */
+void ndp_drain(lcm_t *lcm);
+
+/* Wait up to timeout_s for messages and handle what arrives, then drain. Return 0, or -1 on
+ * an LCM error that is not an interrupted wait. */
+int ndp_handle(lcm_t *lcm, double timeout_s);
+
+#endif

@@ -1,0 +1,121 @@
+/* ndp_validate: range and finiteness checks of every input message. */
+#include "ndp_validate.h"
+
+#include <math.h>
+#include <stdio.h>
+
+/* 0 if all n values are finite and |x| <= lim, else -1 with "<what>[i] = v". */
+static int vec_ok(const double *x, int n, double lim, const char *what, char *why, int len) {
+  for (int i = 0; i < n; i++)
+    if (!isfinite(x[i]) || fabs(x[i]) > lim) {
+      snprintf(why, len, "%s[%d] = %g is not finite or beyond %g", what, i, x[i], lim);
+      return -1;
+    }
+  return 0;
+}
+
+static int utime_ok(int64_t utime, char *why, int len) {
+  if (utime <= 0) {
+    snprintf(why, len, "utime = %lld is not a time", (long long)utime);
+    return -1;
+  }
+  return 0;
+}
+
+static int quat_ok(const double q[4], const char *what, char *why, int len) {
+  if (vec_ok(q, 4, 2.0, what, why, len)) return -1;
+  double n = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+  if (fabs(n - 1.0) > 1e-2) {
+    snprintf(why, len, "%s has norm %g, not a unit quaternion", what, n);
+    return -1;
+  }
+  return 0;
+}
+
+int ndp_check_mocap(const nudge_mocap_t *m, char *why, int len) {
+  if (utime_ok(m->utime, why, len) || vec_ok(m->obj_pos, 3, NDP_MAX_POS, "obj_pos", why, len) ||
+      quat_ok(m->obj_quat, "obj_quat", why, len) ||
+      vec_ok(m->ee_pos, 3, NDP_MAX_POS, "ee_pos", why, len))
+    return -1;
+  return 0;
+}
+
+int ndp_check_robot_state(const nudge_robot_state_t *m, char *why, int len) {
+  if (utime_ok(m->utime, why, len) || vec_ok(m->ee_pos, 3, NDP_MAX_POS, "ee_pos", why, len) ||
+      vec_ok(m->ee_vel, 3, NDP_MAX_VEL, "ee_vel", why, len) ||
+      vec_ok(m->ee_force, 3, NDP_MAX_FORCE, "ee_force", why, len))
+    return -1;
+  return 0;
+}
+
+int ndp_check_ee_cmd(const nudge_ee_cmd_t *m, char *why, int len) {
+  if (utime_ok(m->utime, why, len) || vec_ok(m->p, 3, NDP_MAX_POS, "p", why, len) ||
+      vec_ok(m->v, 3, NDP_MAX_VEL, "v", why, len) || vec_ok(m->a, 3, NDP_MAX_ACC, "a", why, len))
+    return -1;
+  if (m->mode < NUDGE_EE_CMD_T_MODE_TRACKING || m->mode > NUDGE_EE_CMD_T_MODE_HOLDING) {
+    snprintf(why, len, "mode = %d is not a known mode", m->mode);
+    return -1;
+  }
+  return 0;
+}
+
+int ndp_check_plan(const nudge_plan_t *m, char *why, int len) {
+  if (utime_ok(m->utime, why, len) || utime_ok(m->state_utime, why, len)) return -1;
+  if (m->M < 1 || m->M > NUDGE_PLAN_T_MAX_KEYPOINTS) {
+    snprintf(why, len, "M = %d is outside [1, %d]", m->M, NUDGE_PLAN_T_MAX_KEYPOINTS);
+    return -1;
+  }
+  if (!isfinite(m->T) || m->T <= 0.0 || m->T > 5.0) {
+    snprintf(why, len, "T = %g is outside (0, 5] s", m->T);
+    return -1;
+  }
+  for (int k = 0; k < m->M; k++) {
+    if (vec_ok(m->keypoints[k], 2, NDP_MAX_POS, "keypoint position", why, len) ||
+        vec_ok(m->keypoints[k] + 2, 2, NDP_MAX_VEL, "keypoint velocity", why, len))
+      return -1;
+  }
+  return 0;
+}
+
+int ndp_check_task(const nudge_task_t *m, char *why, int len) {
+  const double g[3] = {m->goal_x, m->goal_y, m->goal_yaw};
+  if (utime_ok(m->utime, why, len) || vec_ok(g, 2, NDP_MAX_POS, "goal", why, len) ||
+      vec_ok(g + 2, 1, 100.0, "goal_yaw", why, len))
+    return -1;
+  if (!isfinite(m->eps) || m->eps <= 0.0 || m->eps > 1.0) {
+    snprintf(why, len, "eps = %g is outside (0, 1]", m->eps);
+    return -1;
+  }
+  if (!isfinite(m->time_limit) || m->time_limit <= 0.0 || m->time_limit > 3600.0) {
+    snprintf(why, len, "time_limit = %g is outside (0, 3600] s", m->time_limit);
+    return -1;
+  }
+  if (m->task_id < 0) {
+    snprintf(why, len, "task_id = %lld is negative", (long long)m->task_id);
+    return -1;
+  }
+  return 0;
+}
+
+int ndp_check_params(const nudge_params_t *m, char *why, int len) {
+  static const char *names[4] = {"sliding friction", "torsional friction", "rolling friction",
+                                 "sphere mass"};
+  if (utime_ok(m->utime, why, len)) return -1;
+  for (int i = 0; i < 4; i++) {
+    double v = m->theta_mean[i], s = m->theta_std[i];
+    if (!isfinite(v) || v < 0.0 || (i == 3 && v <= 0.0) || v > 1e4) {
+      snprintf(why, len, "theta_mean[%d] (%s) = %g is not a valid value", i, names[i], v);
+      return -1;
+    }
+    if (!isfinite(s) || s < 0.0) {
+      snprintf(why, len, "theta_std[%d] (%s) = %g is not a valid std", i, names[i], s);
+      return -1;
+    }
+  }
+  if (m->version < 0 || m->buffer_size < 0) {
+    snprintf(why, len, "version %lld / buffer_size %d must not be negative",
+             (long long)m->version, m->buffer_size);
+    return -1;
+  }
+  return 0;
+}

@@ -1,0 +1,30 @@
+/* ndp_validate: the one place that decides whether an incoming message is usable.
+ * Every process runs every decoded input through these before using it; a refused
+ * message is counted in status and never reaches the algorithms. Each returns 0, or
+ * -1 with a reason naming the offending field. */
+#ifndef NDP_VALIDATE_H
+#define NDP_VALIDATE_H
+
+#include "nudge/nudge_ee_cmd_t.h"
+#include "nudge/nudge_episode_t.h"
+#include "nudge/nudge_mocap_t.h"
+#include "nudge/nudge_params_t.h"
+#include "nudge/nudge_plan_t.h"
+#include "nudge/nudge_robot_state_t.h"
+#include "nudge/nudge_task_t.h"
+
+/* Bounds shared by the checks: the workspace is a few metres at most, nothing a pushing
+ * robot does exceeds these by orders of magnitude. */
+#define NDP_MAX_POS 10.0     /* m */
+#define NDP_MAX_VEL 20.0     /* m/s */
+#define NDP_MAX_ACC 1000.0   /* m/s^2 */
+#define NDP_MAX_FORCE 1e5    /* N */
+
+int ndp_check_mocap(const nudge_mocap_t *m, char *why, int len);
+int ndp_check_robot_state(const nudge_robot_state_t *m, char *why, int len);
+int ndp_check_ee_cmd(const nudge_ee_cmd_t *m, char *why, int len);
+int ndp_check_plan(const nudge_plan_t *m, char *why, int len);
+int ndp_check_task(const nudge_task_t *m, char *why, int len);
+int ndp_check_params(const nudge_params_t *m, char *why, int len);
+
+#endif

@@ -1,0 +1,210 @@
+/* nudge-bench: throughput and latency figures of the planning stack.
+ *
+ * Prints a human-readable report, then one `name value unit` line per figure. Figures are
+ * measured in one run so ratios compare like with like; latencies are medians and p90s
+ * over repeated plans. Not a test: nothing here asserts. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "nd_parse.h"
+#include "nds_planner.h"
+
+static double now_s(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+static int cmp_double(const void *a, const void *b) {
+  double x = *(const double *)a, y = *(const double *)b;
+  return (x > y) - (x < y);
+}
+
+/* q-quantile (0..1) of n values, sorting them in place. */
+static double quantile(double *v, int n, double q) {
+  qsort(v, n, sizeof(double), cmp_double);
+  int i = (int)floor(q * (n - 1) + 0.5);
+  return v[i];
+}
+
+/* The start of a push: object at the origin, sphere 8 cm behind it, setpoint at the sphere. */
+static void push_start(const nds_model *nm, nds_state *s, double sp[2][4]) {
+  const double ee[2] = {-0.08, 0.0};
+  nds_state_rest(nm, 0.0, 0.0, 0.0, ee, s);
+  memset(sp, 0, 8 * sizeof(double));
+  sp[0][0] = ee[0];
+  sp[1][0] = ee[1];
+}
+
+/* A family of pushing keypoint sequences through the object, varied by i. */
+static void push_keys(int i, double keys[8]) {
+  double ang = 0.3 * sin(1.7 * i), reach = 0.08 + 0.04 * (i % 5) / 4.0;
+  keys[0] = 0.02 * cos(ang), keys[1] = 0.02 * sin(ang) + 0.01 * (i % 3 - 1);
+  keys[2] = 0.3 * cos(ang), keys[3] = 0.3 * sin(ang);
+  keys[4] = keys[0] + reach * cos(ang), keys[5] = keys[1] + reach * sin(ang);
+  keys[6] = keys[7] = 0.0;
+}
+
+int main(int argc, char **argv) {
+  char err[512];
+  int reps = 30;
+  double plan_dt = 0.005;
+  for (int i = 1; i < argc; i++) {
+    if (!strcmp(argv[i], "-h") || !strcmp(argv[i], "--help")) {
+      printf("usage: nudge-bench [--reps N] [--plan-dt S]\n"
+             "Measures raw mj_step rate, batched rollout efficiency on 1 and 2 workers,\n"
+             "plan latency at the paper's settings and the planning model's prediction error.\n"
+             "  --reps N      plans per latency figure (default 30)\n"
+             "  --plan-dt S   planning model timestep (default 0.005)\n");
+      return 0;
+    }
+    int rc = -1;
+    if (i + 1 < argc && !strcmp(argv[i], "--reps"))
+      rc = nd_parse_int(argv[++i], "--reps", 3, 10000, &reps, err, sizeof(err));
+    else if (i + 1 < argc && !strcmp(argv[i], "--plan-dt"))
+      rc = nd_parse_double(argv[++i], "--plan-dt", 1e-4, 0.02, &plan_dt, err, sizeof(err));
+    else
+      snprintf(err, sizeof(err), "unknown option or missing value: %s", argv[i]);
+    if (rc) {
+      fprintf(stderr, "nudge-bench: %s\n", err);
+      return 2;
+    }
+  }
+
+  nds_scene_cfg pc;
+  nds_scene_cfg_default(&pc);
+  pc.timestep = plan_dt;
+  nds_model nm = {0};
+  if (nds_model_init(&nm, &pc, err, sizeof(err))) {
+    fprintf(stderr, "nudge-bench: %s\n", err);
+    return 1;
+  }
+  nds_ctrl_cfg ctrl;
+  nds_ctrl_cfg_default(&ctrl);
+  nds_state s0;
+  double sp0[2][4];
+  push_start(&nm, &s0, sp0);
+  const int M = 2;
+  const double T = 0.3;
+  const int nsteps = (int)lround(M * T / plan_dt);
+  int ncores = (int)sysconf(_SC_NPROCESSORS_ONLN);
+  printf("nudge-bench: plan model dt %.4f s (%d steps per 0.6 s rollout), condim %d, %d cores\n",
+         plan_dt, nsteps, pc.condim, ncores);
+
+  /* 1. Raw mj_step rate: the same pushes without setpoints or controller, one thread. */
+  mjData *d = mj_makeData(nm.m);
+  const int nroll = 400;
+  double t0 = now_s();
+  for (int r = 0; r < nroll; r++) {
+    nds_state_set(&nm, d, &s0, err, sizeof(err));
+    for (int k = 0; k < nsteps; k++) {
+      d->qfrc_applied[nm.ee_dof[0]] = 4.0 + 0.01 * (r % 7);
+      mj_step(nm.m, d);
+    }
+  }
+  double raw_rate = nroll * (double)nsteps / (now_s() - t0);
+  printf("raw mj_step: %.0f steps/s on one thread (%.2f us/step)\n", raw_rate, 1e6 / raw_rate);
+
+  /* 2. Batched rollouts on 1 and 2 workers, against the raw rate. */
+  const int nbatch = 128;
+  double *keys = malloc(sizeof(double) * nbatch * 8);
+  nds_rollout_out *outs = malloc(sizeof(*outs) * nbatch);
+  for (int i = 0; i < nbatch; i++) push_keys(i, keys + 8 * i);
+  double rate[3] = {0};
+  for (int w = 1; w <= 2; w++) {
+    nd_pool *pool = nd_pool_create(w, err, sizeof(err));
+    nds_batch *b = pool ? nds_batch_create(&nm, pool, err, sizeof(err)) : NULL;
+    if (!b) {
+      fprintf(stderr, "nudge-bench: %s\n", err);
+      return 1;
+    }
+    nds_batch_rollouts(b, &ctrl, &s0, sp0, keys, nbatch, M, T, outs);  /* warm caches */
+    const int rounds = 4;
+    t0 = now_s();
+    for (int r = 0; r < rounds; r++) nds_batch_rollouts(b, &ctrl, &s0, sp0, keys, nbatch, M, T, outs);
+    rate[w] = rounds * nbatch * (double)nsteps / (now_s() - t0);
+    printf("batched rollouts, %d worker(s): %.0f steps/s = %.2f x raw mj_step\n", w, rate[w],
+           rate[w] / raw_rate);
+    nds_batch_free(b);
+    nd_pool_free(pool);
+  }
+  double eff2 = rate[2] / (2.0 * raw_rate);
+  printf("parallel efficiency on 2 workers: %.2f of 2 x raw mj_step, %.2f of 2 x 1-worker batch\n",
+         eff2, rate[2] / (2.0 * rate[1]));
+
+  /* 3. Plan latency at the paper's settings on every core, warm-started like the MPC. */
+  const int settings[2][2] = {{128, 4}, {50, 2}};
+  double med[2], p90[2];
+  double *lat = malloc(sizeof(double) * reps);
+  nd_pool *pool = nd_pool_create(ncores < 1 ? 1 : ncores, err, sizeof(err));
+  for (int k = 0; k < 2; k++) {
+    nds_planner_cfg cfg;
+    nds_planner_cfg_default(&cfg);
+    cfg.pop = settings[k][0];
+    cfg.iters = settings[k][1];
+    nds_planner *p = nds_planner_create(&nm, &cfg, pool, err, sizeof(err));
+    if (!p) {
+      fprintf(stderr, "nudge-bench: %s\n", err);
+      return 1;
+    }
+    const nd_goal goal = {0.2, 0.05, 0.3};
+    nds_plan plan;
+    for (int r = 0; r < reps; r++) {
+      double t = now_s();
+      nds_planner_plan(p, &s0, sp0, &goal, &plan, err, sizeof(err));
+      lat[r] = 1e3 * (now_s() - t);
+    }
+    med[k] = quantile(lat, reps, 0.5);
+    p90[k] = quantile(lat, reps, 0.9);
+    printf("plan N %3d C %d, H 0.6 s, M 2, %d workers: median %.1f ms, p90 %.1f ms (%d rollouts)\n",
+           cfg.pop, cfg.iters, nd_pool_size(pool), med[k], p90[k], plan.evals);
+    nds_planner_free(p);
+  }
+  nd_pool_free(pool);
+
+  /* 4. Prediction error of the planning model against the 1 ms world: the same pushes,
+   * final object position after the 0.6 s horizon. */
+  nds_scene_cfg wc = pc;
+  wc.timestep = 0.001;
+  nds_model world = {0};
+  if (nds_model_init(&world, &wc, err, sizeof(err))) {
+    fprintf(stderr, "nudge-bench: %s\n", err);
+    return 1;
+  }
+  mjData *dw = mj_makeData(world.m);
+  double *perr = malloc(sizeof(double) * nbatch);
+  double moved = 0.0;
+  for (int i = 0; i < nbatch; i++) {
+    nds_rollout_out a, b;
+    nds_rollout(&world, dw, &ctrl, &s0, sp0, keys + 8 * i, M, T, &a);
+    nds_rollout(&nm, d, &ctrl, &s0, sp0, keys + 8 * i, M, T, &b);
+    perr[i] = hypot(a.obj_xy[0] - b.obj_xy[0], a.obj_xy[1] - b.obj_xy[1]);
+    moved += hypot(a.obj_xy[0] - s0.obj_pos[0], a.obj_xy[1] - s0.obj_pos[1]) / nbatch;
+  }
+  double pe_med = quantile(perr, nbatch, 0.5), pe_max = perr[nbatch - 1];
+  printf("prediction error at dt %.4f vs 1 ms world over 0.6 s: median %.4f m, max %.4f m "
+         "(object moved %.3f m on average)\n", plan_dt, pe_med, pe_max, moved);
+
+  printf("mj_step_rate %.0f steps/s\n", raw_rate);
+  printf("rollout_ratio_1w %.3f ratio\n", rate[1] / raw_rate);
+  printf("rollout_efficiency_2w %.3f ratio\n", eff2);
+  printf("plan_ms_median_n128_c4 %.1f ms\n", med[0]);
+  printf("plan_ms_median_n50_c2 %.1f ms\n", med[1]);
+  printf("plan_ms_p90_n50_c2 %.1f ms\n", p90[1]);
+  printf("plan_dt %.4f s\n", plan_dt);
+  printf("prediction_error_m %.4f m\n", pe_med);
+
+  free(perr);
+  free(lat);
+  free(keys);
+  free(outs);
+  mj_deleteData(dw);
+  mj_deleteData(d);
+  nds_model_free(&world);
+  nds_model_free(&nm);
+  return 0;
+}
