@@ -166,8 +166,8 @@ int main(int argc, char **argv) {
   }
   nd_pool_free(pool);
 
-  /* 4. Prediction error of the planning model against the 1 ms world: the same pushes,
-   * final object position after the 0.6 s horizon. */
+  /* 4. What the coarse planning step costs: the same pushes in the planning model and in
+   * the 1 ms world, final object position after the 0.6 s horizon, for several steps. */
   nds_scene_cfg wc = pc;
   wc.timestep = 0.001;
   nds_model world = {0};
@@ -176,18 +176,41 @@ int main(int argc, char **argv) {
     return 1;
   }
   mjData *dw = mj_makeData(world.m);
+  nds_rollout_out *ref = malloc(sizeof(*ref) * nbatch);
   double *perr = malloc(sizeof(double) * nbatch);
   double moved = 0.0;
   for (int i = 0; i < nbatch; i++) {
-    nds_rollout_out a, b;
-    nds_rollout(&world, dw, &ctrl, &s0, sp0, keys + 8 * i, M, T, &a);
-    nds_rollout(&nm, d, &ctrl, &s0, sp0, keys + 8 * i, M, T, &b);
-    perr[i] = hypot(a.obj_xy[0] - b.obj_xy[0], a.obj_xy[1] - b.obj_xy[1]);
-    moved += hypot(a.obj_xy[0] - s0.obj_pos[0], a.obj_xy[1] - s0.obj_pos[1]) / nbatch;
+    nds_rollout(&world, dw, &ctrl, &s0, sp0, keys + 8 * i, M, T, &ref[i]);
+    moved += hypot(ref[i].obj_xy[0] - s0.obj_pos[0], ref[i].obj_xy[1] - s0.obj_pos[1]) / nbatch;
   }
-  double pe_med = quantile(perr, nbatch, 0.5), pe_max = perr[nbatch - 1];
-  printf("prediction error at dt %.4f vs 1 ms world over 0.6 s: median %.4f m, max %.4f m "
-         "(object moved %.3f m on average)\n", plan_dt, pe_med, pe_max, moved);
+  const double dts[4] = {0.002, 0.005, 0.010, plan_dt};
+  double pe_med = 0.0;
+  printf("planning step vs the 1 ms world, %d pushes over 0.6 s (object moved %.3f m on average):\n",
+         nbatch, moved);
+  for (int k = 0; k < 4; k++) {
+    if (k == 3 && (plan_dt == 0.002 || plan_dt == 0.005 || plan_dt == 0.010)) break;
+    nds_scene_cfg c = pc;
+    c.timestep = dts[k];
+    nds_model m2 = {0};
+    if (nds_model_init(&m2, &c, err, sizeof(err))) {
+      fprintf(stderr, "nudge-bench: %s\n", err);
+      return 1;
+    }
+    mjData *d2 = mj_makeData(m2.m);
+    t0 = now_s();
+    for (int i = 0; i < nbatch; i++) {
+      nds_rollout_out o;
+      nds_rollout(&m2, d2, &ctrl, &s0, sp0, keys + 8 * i, M, T, &o);
+      perr[i] = hypot(o.obj_xy[0] - ref[i].obj_xy[0], o.obj_xy[1] - ref[i].obj_xy[1]);
+    }
+    double ms = 1e3 * (now_s() - t0) / nbatch;
+    double med_k = quantile(perr, nbatch, 0.5);
+    printf("  dt %.3f s: %.3f ms per rollout, object position error median %.4f m, max %.4f m\n",
+           dts[k], ms, med_k, perr[nbatch - 1]);
+    if (dts[k] == plan_dt) pe_med = med_k;
+    mj_deleteData(d2);
+    nds_model_free(&m2);
+  }
 
   printf("mj_step_rate %.0f steps/s\n", raw_rate);
   printf("rollout_ratio_1w %.3f ratio\n", rate[1] / raw_rate);
@@ -199,6 +222,7 @@ int main(int argc, char **argv) {
   printf("prediction_error_m %.4f m\n", pe_med);
 
   free(perr);
+  free(ref);
   free(lat);
   free(keys);
   free(outs);

@@ -28,7 +28,7 @@ static int setup(void **state) {
   nds_planner_cfg_default(&cfg);
   cfg.pop = 32;
   cfg.iters = 2;
-  cfg.seed = 7;
+  cfg.seed = 3;
   f->planner = nds_planner_create(&f->plan, &cfg, f->pool, err, sizeof(err));
   assert_non_null(f->planner);
   f->d = mj_makeData(f->world.m);
@@ -64,12 +64,12 @@ static void run(fixture *f, const nd_goal *g, nds_episode_out *o) {
          o->plans);
 }
 
-/* Two of the demo's goals (a straight push and a push with a turn) are reached at eps 1e-2
- * within 5 s, and the reported error agrees with the reported pose errors. */
+/* Three of the demo's goals (a straight push and pushes with a turn either way) are reached
+ * at eps 1e-2 within 5 s at N 32, C 2, and the reported pose errors agree with it. */
 static void test_reaches_goals(void **state) {
   fixture *f = *state;
-  const nd_goal goals[2] = {{0.20, 0.00, 0.0}, {0.15, 0.12, 0.6}};
-  for (int i = 0; i < 2; i++) {
+  const nd_goal goals[3] = {{0.20, 0.00, 0.0}, {0.15, 0.12, 0.6}, {0.15, -0.12, -0.6}};
+  for (int i = 0; i < 3; i++) {
     nds_episode_out o;
     run(f, &goals[i], &o);
     assert_int_equal(o.reached, 1);
