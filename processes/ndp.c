@@ -100,6 +100,11 @@ int ndp_status_tick(lcm_t *lcm, ndp_status *st, int force) {
     m.period_p99_us = (int32_t)nd_jitter_quantile(st->jitter, 0.99);
     m.period_max_us = (int32_t)st->jitter->max_us;
     m.overruns = st->jitter->overruns;
+  } else if (st->loop) {
+    m.period_p50_us = st->loop->p50_us;
+    m.period_p99_us = st->loop->p99_us;
+    m.period_max_us = st->loop->max_us;
+    m.overruns = st->loop->overruns;
   }
   m.uptime = now - st->t0;
   if (nudge_status_t_publish(lcm, NDP_CH_STATUS, &m) != 0) return -1;

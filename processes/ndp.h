@@ -47,13 +47,23 @@ double ndp_mono(void);
  * callers detect instabilities through mjData's warning counters. */
 void ndp_mujoco_handlers(const char *prog);
 
+/* Loop statistics as a real-time thread hands them to the heartbeat: the histogram stays
+ * with the thread that writes it (reading it from another thread would race), this small
+ * copy travels through a mailbox. */
+typedef struct {
+  int32_t p50_us, p99_us, max_us;
+  int64_t overruns;
+} ndp_loop_stats;
+
 /* The heartbeat every process publishes on STATUS. Counters are plain fields owned by
- * the process's main thread; loop statistics come from an optional nd_jitter. */
+ * the process's main thread; loop statistics come from an optional nd_jitter the main
+ * thread owns, or else from an optional ndp_loop_stats copy. */
 typedef struct {
   const char *name;
   int64_t received, published, rejected;
   const char *state;   /* short word: "running", "holding", ... */
   const nd_jitter *jitter;
+  const ndp_loop_stats *loop;  /* used when jitter is NULL */
   double t0;           /* ndp_mono() at start */
   double next;         /* next publication time */
 } ndp_status;

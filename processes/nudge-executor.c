@@ -1,0 +1,646 @@
+/* nudge-executor: the 1 kHz trajectory executor.
+ *
+ * Follows the newest PLAN's first keypoint with a minimum-snap segment (core/nd_exec.h)
+ * and publishes the setpoint (p, v, a) on EE_CMD every cycle. When the plan or the
+ * robot state goes stale it brakes to rest and holds; a fresh plan resumes.
+ *
+ * Two threads. The main thread owns LCM: it validates inputs and posts the newest of
+ * each kind into a mailbox, publishes what the loop left in the ring, logs, and sends the
+ * heartbeat. The real-time thread sleeps to absolute deadlines, reads the mailboxes
+ * without waiting, steps the executor and encodes EE_CMD into the ring: it never
+ * allocates, locks, prints or waits on I/O, so a slow network or terminal cannot delay a
+ * setpoint. Its one system call besides the clock is a non-blocking eventfd write that
+ * wakes the main thread to publish at once: polling the ring instead would add up to a
+ * period of latency to every setpoint. Everything the loop reports (mode, stale spells,
+ * refused plans, jitter) goes back through a third mailbox. */
+#include <errno.h>
+#include <math.h>
+#include <pthread.h>
+#include <sched.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <poll.h>
+#include <sys/eventfd.h>
+#include <sys/mman.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "nd_exec.h"
+#include "nd_jitter.h"
+#include "nd_parse.h"
+#include "nd_rtio.h"
+#include "ndp.h"
+#include "ndp_validate.h"
+
+#define PROG "nudge-executor"
+#define STATS_PERIOD 0.1   /* s between statistics posts of the loop */
+#define RT_PRIORITY 80      /* the loop */
+#define IO_PRIORITY 70      /* the main thread: publishing must not starve behind batch work */
+#define RT_STACK (256 * 1024)
+
+/* ---- what crosses between the threads ---------------------------------------------- */
+
+/* Newest robot state: only what the loop needs, stamped with its local arrival time. */
+typedef struct {
+  double t_arrive;     /* ndp_mono() when the I/O thread received it */
+  double ee_pos[3];
+} state_in;
+
+/* Newest plan: its first keypoint and segment duration. */
+typedef struct {
+  double t_arrive;
+  int64_t plan_id;
+  double key[4];       /* (x, y, vx, vy) */
+  double T;
+} plan_in;
+
+/* Why the executor is stale: bits. */
+enum { STALE_NO_PLAN = 1, STALE_PLAN = 2, STALE_STATE = 4 };
+
+/* What the loop tells the I/O thread: posted every STATS_PERIOD and at once on a stale
+ * transition or a refused plan. Counters only grow, so a reader that misses a post
+ * still sees every event in the next one. */
+typedef struct {
+  int mode;                 /* ND_EXEC_* mode, or -1 before the first robot state */
+  int stale;                /* STALE_* bits, 0 when live */
+  int64_t n_stale, n_resume;/* transitions to stale and back */
+  int64_t cycles, sent;     /* loop cycles; setpoints committed to the ring */
+  int64_t accepted, refused;/* plans taken / refused by nd_exec */
+  int64_t refused_id;       /* plan_id of the last refused plan */
+  char refused_why[160];    /* nd_exec's reason for it */
+  int64_t plan_id;          /* plan being followed, -1 before the first */
+  int64_t missed;           /* deadlines skipped after overruns */
+  ndp_loop_stats loop;      /* period error (us) and overruns */
+} rt_report;
+
+_Static_assert(sizeof(state_in) <= ND_RTIO_MAX && sizeof(plan_in) <= ND_RTIO_MAX &&
+                   sizeof(rt_report) <= ND_RTIO_MAX,
+               "mailbox payloads must fit an nd_mailbox");
+
+/* Tag of EE_CMD messages in the ring (the only kind the loop publishes). */
+enum { TAG_EE_CMD = 1 };
+
+/* The hand-over objects, shared by both threads. */
+typedef struct {
+  nd_mailbox state, plan, report;
+  nd_ring ring;
+  int bell;            /* eventfd: the loop rings it after committing to the ring */
+  atomic_int stop;
+} exec_io;
+
+/* ---- the loop ---------------------------------------------------------------------- */
+
+/* Settings; constant once the loop runs. */
+typedef struct {
+  double rate;         /* Hz */
+  double timeout;      /* s: inputs older than this are stale */
+  nd_exec_cfg cfg;
+  int rt;              /* try SCHED_FIFO and mlockall */
+  const char *url;
+} exec_opts;
+
+/* Mutable state of the real-time thread; only that thread touches it. */
+typedef struct {
+  const exec_opts *opt;
+  exec_io *io;
+  uint64_t v_state, v_plan;     /* mailbox versions taken */
+  int have_state;               /* first robot state seen: nd_exec initialised */
+  double z;                     /* sphere height: the first measured ee z */
+  double t_state;               /* arrival of the newest robot state */
+  int pending;                  /* plan taken but not yet applied */
+  plan_in plan;
+  int have_plan;                /* a plan has been accepted */
+  double t_plan;                /* arrival of the newest accepted plan */
+  nd_exec ex;
+  int64_t seq;
+  nd_jitter jit;
+  double next_report;
+  rt_report rep;
+} exec_state;
+
+static void exec_state_init(exec_state *s, const exec_opts *opt, exec_io *io) {
+  memset(s, 0, sizeof(*s));
+  s->opt = opt;
+  s->io = io;
+  nd_jitter_reset(&s->jit);
+  s->rep.mode = -1;
+  s->rep.plan_id = -1;
+  s->rep.refused_id = -1;
+}
+
+/* Post the report: now if force, else when STATS_PERIOD has passed. */
+static void exec_report(exec_state *s, double now, int force) {
+  if (!force && now < s->next_report) return;
+  s->next_report = now + STATS_PERIOD;
+  s->rep.loop.p50_us = (int32_t)nd_jitter_quantile(&s->jit, 0.5);
+  s->rep.loop.p99_us = (int32_t)nd_jitter_quantile(&s->jit, 0.99);
+  s->rep.loop.max_us = (int32_t)s->jit.max_us;
+  nd_mailbox_post(&s->io->report, &s->rep, (int)sizeof(s->rep));
+}
+
+/* One cycle at monotonic time now (s), which is wall-clock time utime (us): take inputs,
+ * apply a new plan, step the executor, commit the setpoint for that instant to the ring.
+ * Returns 1 if a setpoint was committed, 0 before the first robot state, -1 if the ring
+ * was full (counted by the ring). No allocation, no locks, no I/O. */
+static int exec_cycle(exec_state *s, double now, int64_t utime) {
+  const double timeout = s->opt->timeout;
+  int dirty = 0;
+  state_in st;
+  plan_in pl;
+  s->rep.cycles++;
+
+  if (nd_mailbox_take(&s->io->state, &s->v_state, &st, (int)sizeof(st)) == (int)sizeof(st)) {
+    if (!s->have_state) {
+      /* Nothing to command before we know where the robot is: start at rest there. */
+      nd_exec_init(&s->ex, st.ee_pos, now);
+      s->z = st.ee_pos[2];
+      s->have_state = 1;
+      dirty = 1;
+    }
+    s->t_state = st.t_arrive;
+  }
+  if (nd_mailbox_take(&s->io->plan, &s->v_plan, &pl, (int)sizeof(pl)) == (int)sizeof(pl)) {
+    s->plan = pl;
+    s->pending = 1;
+  }
+  if (!s->have_state) {
+    exec_report(s, now, dirty);
+    return 0;
+  }
+
+  const int state_stale = now - s->t_state > timeout;
+  /* A plan waits while the state is stale (it would be dropped again at once) and is
+   * applied when the state returns, if it is still fresh itself. */
+  if (s->pending && !state_stale) {
+    s->pending = 0;
+    if (now - s->plan.t_arrive <= timeout) {
+      const int rc = nd_exec_plan(&s->ex, &s->opt->cfg, now, s->plan.key, s->plan.T,
+                                  s->rep.refused_why, (int)sizeof(s->rep.refused_why));
+      if (rc == ND_EXEC_OK) {
+        s->have_plan = 1;
+        s->t_plan = s->plan.t_arrive;
+        s->rep.plan_id = s->plan.plan_id;
+        s->rep.accepted++;
+      } else {
+        /* A refused plan does not refresh the plan clock: a planner sending only
+         * unreachable plans must not keep the robot on its old segment. */
+        s->rep.refused++;
+        s->rep.refused_id = s->plan.plan_id;
+        dirty = 1;
+      }
+    }
+  }
+
+  int stale = state_stale ? STALE_STATE : 0;
+  if (!s->have_plan) stale |= STALE_NO_PLAN;
+  else if (now - s->t_plan > timeout) stale |= STALE_PLAN;
+  if (!stale != !s->rep.stale || s->rep.mode < 0) {
+    if (stale) s->rep.n_stale++;
+    else s->rep.n_resume++;
+    dirty = 1;
+  }
+  s->rep.stale = stale;
+
+  double sp[2][4];
+  const int mode = nd_exec_step(&s->ex, &s->opt->cfg, now, stale != 0, sp);
+  if (mode != s->rep.mode) dirty = 1;
+  s->rep.mode = mode;
+
+  nudge_ee_cmd_t m;
+  m.utime = utime;
+  m.seq = s->seq++;
+  m.plan_id = s->rep.plan_id;
+  m.mode = (int8_t)mode;
+  for (int ax = 0; ax < 2; ax++) {
+    m.p[ax] = sp[ax][ND_P];
+    m.v[ax] = sp[ax][ND_V];
+    m.a[ax] = sp[ax][ND_A];
+  }
+  m.p[2] = s->z;
+  m.v[2] = m.a[2] = 0.0;
+
+  int ret = -1;
+  unsigned char *slot = nd_ring_reserve(&s->io->ring);
+  if (slot) {
+    /* A fixed-size type: encoding writes into the slot and allocates nothing. */
+    const int len = nudge_ee_cmd_t_encode(slot, 0, ND_RTIO_MAX, &m);
+    if (len > 0) {
+      nd_ring_commit(&s->io->ring, TAG_EE_CMD, len);
+      s->rep.sent++;
+      ret = 1;
+    }
+  }
+  exec_report(s, now, dirty);
+  return ret;
+}
+
+static int64_t ts_ns(const struct timespec *ts) {
+  return (int64_t)ts->tv_sec * 1000000000 + ts->tv_nsec;
+}
+
+static struct timespec ns_ts(int64_t ns) {
+  struct timespec ts = {(time_t)(ns / 1000000000), (long)(ns % 1000000000)};
+  return ts;
+}
+
+/* Wait for the deadline *next_ns, record the wake-up error and run one cycle; then
+ * advance *next_ns by a period, past every deadline already missed (a late loop skips
+ * cycles rather than bursting to catch up: each setpoint is computed for the time it is
+ * sent anyway). */
+static void exec_tick(exec_state *s, int64_t *next_ns, int64_t period_ns) {
+  struct timespec dl = ns_ts(*next_ns), now_ts;
+  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &dl, NULL) == EINTR) {
+  }
+  clock_gettime(CLOCK_MONOTONIC, &now_ts);
+  /* Stamp the setpoint with the instant it is computed for, not when computing ends:
+   * a plan search takes up to ~0.1 ms, and a late stamp would skew dt downstream. */
+  const int64_t utime = ndp_utime();
+  const int64_t woke = ts_ns(&now_ts);
+  nd_jitter_add(&s->jit, 1e-3 * (double)(woke - *next_ns), 1e-3 * (double)period_ns);
+  if (exec_cycle(s, 1e-9 * (double)woke, utime) > 0) {
+    /* Non-blocking: a full counter (never, in practice) just means it is rung already. */
+    const uint64_t one = 1;
+    if (write(s->io->bell, &one, sizeof one) < 0) {
+    }
+  }
+  *next_ns += period_ns;
+  clock_gettime(CLOCK_MONOTONIC, &now_ts);
+  const int64_t done = ts_ns(&now_ts);
+  if (done > *next_ns) {
+    const int64_t skip = (done - *next_ns) / period_ns + 1;
+    *next_ns += skip * period_ns;
+    s->rep.missed += skip;
+    s->rep.loop.overruns++;
+  }
+}
+
+static void *rt_main(void *arg) {
+  exec_state *s = arg;
+  const int64_t period_ns = (int64_t)llround(1e9 / s->opt->rate);
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  int64_t next = ts_ns(&ts) + period_ns;
+  while (!atomic_load_explicit(&s->io->stop, memory_order_relaxed))
+    exec_tick(s, &next, period_ns);
+  exec_report(s, 1e-9 * (double)next, 1);
+  return NULL;
+}
+
+/* ---- the I/O thread ------------------------------------------------------------------ */
+
+/* Log the first few refusals of one kind, then one every 10 s with a count, so a flood
+ * of bad input cannot flood the log. */
+typedef struct {
+  const char *what;
+  double next;         /* earliest time of the next line after the first five */
+} refusal_log;
+
+/* n_total: refusals of this kind so far, this one included. */
+static void log_refusal(refusal_log *rl, int64_t n_total, const char *why) {
+  const double now = ndp_mono();
+  if (n_total > 5 && now < rl->next) return;
+  fprintf(stderr, PROG ": refused %s: %s", rl->what, why);
+  if (n_total > 5) fprintf(stderr, " (%lld refused so far)", (long long)n_total);
+  fputc('\n', stderr);
+  if (n_total >= 5) rl->next = now + 10.0;
+}
+
+typedef struct {
+  exec_io *io;
+  double timeout;
+  ndp_status st;
+  int64_t refused_state, refused_plan;
+  int backlog_max;     /* most setpoints found waiting in the ring at once */
+  refusal_log log_state, log_plan, log_exec;
+} io_ctx;
+
+static void on_state(const lcm_recv_buf_t *rbuf, const char *ch,
+                     const nudge_robot_state_t *msg, void *user) {
+  (void)rbuf;
+  (void)ch;
+  io_ctx *c = user;
+  char why[160];
+  c->st.received++;
+  if (ndp_check_robot_state(msg, why, sizeof why)) {
+    c->st.rejected++;
+    log_refusal(&c->log_state, ++c->refused_state, why);
+    return;
+  }
+  state_in in;
+  in.t_arrive = ndp_mono();
+  memcpy(in.ee_pos, msg->ee_pos, sizeof in.ee_pos);
+  nd_mailbox_post(&c->io->state, &in, (int)sizeof(in));
+}
+
+static void on_plan(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_plan_t *msg,
+                    void *user) {
+  (void)rbuf;
+  (void)ch;
+  io_ctx *c = user;
+  char why[160];
+  c->st.received++;
+  if (ndp_check_plan(msg, why, sizeof why)) {
+    c->st.rejected++;
+    log_refusal(&c->log_plan, ++c->refused_plan, why);
+    return;
+  }
+  plan_in in;
+  in.t_arrive = ndp_mono();
+  in.plan_id = msg->plan_id;
+  memcpy(in.key, msg->keypoints[0], sizeof in.key);
+  in.T = msg->T;
+  nd_mailbox_post(&c->io->plan, &in, (int)sizeof(in));
+}
+
+static void say_stale(int bits, double timeout) {
+  if (bits & STALE_STATE)
+    fprintf(stderr, PROG ": stale: no ROBOT_STATE for %g s: braking to rest and holding\n",
+            timeout);
+  else if (bits & STALE_NO_PLAN)
+    fprintf(stderr, PROG ": robot state received: holding there until a PLAN arrives\n");
+  else
+    fprintf(stderr, PROG ": stale: no PLAN for %g s: braking to rest and holding\n", timeout);
+}
+
+/* Publish what the loop committed, oldest first. Return the number popped, -1 on a
+ * publish error. */
+static int publish_ring(lcm_t *lcm, io_ctx *c) {
+  unsigned char buf[ND_RTIO_MAX];
+  int tag, len, n = 0, bad = 0;
+  while ((len = nd_ring_pop(&c->io->ring, &tag, buf, sizeof buf)) >= 0) {
+    n++;
+    if (tag != TAG_EE_CMD) continue;
+    if (lcm_publish(lcm, NDP_CH_EE_CMD, buf, len) != 0) {
+      bad = 1;
+      continue;
+    }
+    c->st.published++;
+  }
+  /* More than one waiting means this thread fell behind the loop by that many periods. */
+  if (n > c->backlog_max) c->backlog_max = n;
+  return bad ? -1 : n;
+}
+
+/* ---- command line ------------------------------------------------------------------- */
+
+static void usage(FILE *f) {
+  const nd_exec_cfg d = nd_exec_cfg_default();
+  fprintf(f,
+          "usage: " PROG " [options]\n"
+          "Follow the newest PLAN's first keypoint with a minimum-snap segment and publish\n"
+          "the end-effector setpoint (p, v, a) on EE_CMD at a fixed rate. Publishes nothing\n"
+          "until the first ROBOT_STATE; brakes to rest and holds while PLAN or ROBOT_STATE\n"
+          "is stale; a fresh plan resumes.\n\n"
+          "  --rate HZ       loop rate (default 1000)\n"
+          "  --timeout S     inputs older than this are stale (default 0.1)\n"
+          "  --v-max M/S     speed limit (default %g)\n"
+          "  --a-max M/S2    acceleration limit (default %g)\n"
+          "  --j-max M/S3    jerk limit (default %g)\n"
+          "  --lcm-url URL   LCM URL (default: $LCM_DEFAULT_URL, else " NDP_DEFAULT_URL ")\n"
+          "  --no-rt         do not ask for SCHED_FIFO and mlockall\n"
+          "  -h, --help      this text\n\n"
+          "Subscribes PLAN, ROBOT_STATE; publishes EE_CMD, STATUS (1 Hz).\n",
+          d.v_max, d.a_max, d.j_max);
+}
+
+static int bad_arg(const char *msg) {
+  fprintf(stderr, PROG ": %s\n", msg);
+  usage(stderr);
+  return 2;
+}
+
+/* Parse argv into o. Returns -1 to go on, else the exit code. */
+static int parse_args(int argc, char **argv, exec_opts *o) {
+  char err[256];
+  o->rate = 1000.0;
+  o->timeout = 0.1;
+  o->cfg = nd_exec_cfg_default();
+  o->rt = 1;
+  o->url = NULL;
+  for (int i = 1; i < argc; i++) {
+    const char *a = argv[i];
+    if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
+      usage(stdout);
+      return 0;
+    }
+    if (!strcmp(a, "--no-rt")) {
+      o->rt = 0;
+      continue;
+    }
+    double *dst = NULL, lo = 0.0, hi = 0.0;
+    if (!strcmp(a, "--rate")) dst = &o->rate, lo = 1.0, hi = 10000.0;
+    else if (!strcmp(a, "--timeout")) dst = &o->timeout, lo = 1e-3, hi = 60.0;
+    else if (!strcmp(a, "--v-max")) dst = &o->cfg.v_max, lo = 1e-3, hi = 10.0;
+    else if (!strcmp(a, "--a-max")) dst = &o->cfg.a_max, lo = 1e-3, hi = 1000.0;
+    else if (!strcmp(a, "--j-max")) dst = &o->cfg.j_max, lo = 1e-3, hi = 1e6;
+    else if (strcmp(a, "--lcm-url")) {
+      snprintf(err, sizeof err, "unknown argument '%s'", a);
+      return bad_arg(err);
+    }
+    if (i + 1 >= argc) {
+      snprintf(err, sizeof err, "%s needs a value", a);
+      return bad_arg(err);
+    }
+    const char *v = argv[++i];
+    if (!dst) {
+      o->url = v;
+    } else if (nd_parse_double(v, a, lo, hi, dst, err, sizeof err)) {
+      return bad_arg(err);
+    }
+  }
+  if (nd_exec_cfg_check(&o->cfg, err, sizeof err)) return bad_arg(err);
+  return -1;
+}
+
+/* ---- main --------------------------------------------------------------------------- */
+
+/* Lock memory before the loop thread exists: mlockall populates every mapping, and a
+ * loop running meanwhile would stall on page faults. Say once if refused. */
+static void lock_memory(void) {
+  if (mlockall(MCL_CURRENT | MCL_FUTURE) != 0)
+    fprintf(stderr, PROG ": mlockall refused (%s); going on with pageable memory\n",
+            strerror(errno));
+}
+
+/* Put the loop thread t and (lower) this thread on SCHED_FIFO; say once if refused. */
+static void go_realtime(pthread_t t) {
+  struct sched_param sp = {.sched_priority = RT_PRIORITY};
+  int rc = pthread_setschedparam(t, SCHED_FIFO, &sp);
+  if (rc == 0) {
+    sp.sched_priority = IO_PRIORITY;
+    rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
+  }
+  if (rc != 0)
+    fprintf(stderr, PROG ": SCHED_FIFO refused (%s); running at normal priority\n",
+            strerror(rc));
+}
+
+/* Print the loop's stale transitions and refused plans that are new since *last. */
+static void note_report(io_ctx *c, const rt_report *r, rt_report *last) {
+  if (r->n_stale != last->n_stale || r->n_resume != last->n_resume) {
+    const int64_t flips = (r->n_stale - last->n_stale) + (r->n_resume - last->n_resume);
+    if (r->stale)
+      say_stale(r->stale, c->timeout);
+    else
+      fprintf(stderr, PROG ": fresh plan %lld: tracking again\n", (long long)r->plan_id);
+    if (flips > 1)
+      fprintf(stderr, PROG ": (%lld stale/fresh changes since the last report)\n",
+              (long long)flips);
+  }
+  if (r->refused != last->refused) {
+    char why[200];
+    snprintf(why, sizeof why, "plan %lld: %s", (long long)r->refused_id, r->refused_why);
+    log_refusal(&c->log_exec, r->refused, why);
+  }
+  *last = *r;
+}
+
+int main(int argc, char **argv) {
+  static exec_opts opt;
+  static exec_io io;
+  static exec_state rt;
+  static io_ctx c;
+  char err[512];
+
+  const int prc = parse_args(argc, argv, &opt);
+  if (prc >= 0) return prc;
+
+  ndp_signals();
+  lcm_t *lcm = ndp_lcm_create(opt.url, err, sizeof err);
+  if (!lcm) {
+    fprintf(stderr, PROG ": %s\n", err);
+    return 1;
+  }
+
+  nd_mailbox_init(&io.state);
+  nd_mailbox_init(&io.plan);
+  nd_mailbox_init(&io.report);
+  nd_ring_init(&io.ring);
+  io.bell = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
+  if (io.bell < 0) {
+    fprintf(stderr, PROG ": eventfd: %s\n", strerror(errno));
+    lcm_destroy(lcm);
+    return 1;
+  }
+  atomic_store(&io.stop, 0);
+  exec_state_init(&rt, &opt, &io);
+
+  c.io = &io;
+  c.timeout = opt.timeout;
+  ndp_status_init(&c.st, PROG);
+  c.st.state = "waiting";
+  c.log_state.what = "ROBOT_STATE";
+  c.log_plan.what = "PLAN";
+  c.log_exec.what = "plan";
+  nudge_robot_state_t_subscription_t *sub_state =
+      nudge_robot_state_t_subscribe(lcm, NDP_CH_ROBOT_STATE, on_state, &c);
+  nudge_plan_t_subscription_t *sub_plan = nudge_plan_t_subscribe(lcm, NDP_CH_PLAN, on_plan, &c);
+  if (!sub_state || !sub_plan) {
+    fprintf(stderr, PROG ": cannot subscribe to " NDP_CH_ROBOT_STATE " and " NDP_CH_PLAN "\n");
+    lcm_destroy(lcm);
+    return 1;
+  }
+  /* lcm-gen computes a type's hash lazily on first use: do it here, not in the loop. */
+  (void)nudge_ee_cmd_t_encoded_size(&(nudge_ee_cmd_t){0});
+
+  fprintf(stderr,
+          PROG ": rate %g Hz, timeout %g s, v_max %g m/s, a_max %g m/s^2, j_max %g m/s^3, "
+               "lcm %s, real-time %s\n",
+          opt.rate, opt.timeout, opt.cfg.v_max, opt.cfg.a_max, opt.cfg.j_max,
+          ndp_url(opt.url), opt.rt ? "requested" : "off (--no-rt)");
+
+  if (opt.rt) lock_memory();
+  /* Signals go to this thread only: the loop's sleeps stay uninterrupted. */
+  sigset_t block, old;
+  sigemptyset(&block);
+  sigaddset(&block, SIGINT);
+  sigaddset(&block, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &block, &old);
+  pthread_attr_t attr;
+  pthread_attr_init(&attr);
+  pthread_attr_setstacksize(&attr, RT_STACK);
+  pthread_t tid;
+  const int crc = pthread_create(&tid, &attr, rt_main, &rt);
+  pthread_attr_destroy(&attr);
+  pthread_sigmask(SIG_SETMASK, &old, NULL);
+  if (crc != 0) {
+    fprintf(stderr, PROG ": cannot start the loop thread: %s\n", strerror(crc));
+    lcm_destroy(lcm);
+    return 1;
+  }
+  if (opt.rt) go_realtime(tid);
+
+  rt_report rep, last;
+  memset(&last, 0, sizeof last);
+  last.mode = -1;
+  ndp_loop_stats loop = {0, 0, 0, 0};
+  c.st.loop = &loop;
+  uint64_t v_rep = 0;
+  uint64_t drops_seen = 0;
+  int pub_failing = 0, code = 0;
+  struct pollfd fds[2] = {{.fd = lcm_get_fileno(lcm), .events = POLLIN},
+                          {.fd = io.bell, .events = POLLIN}};
+  while (!ndp_quit) {
+    /* Wakes for input, for each committed setpoint, and at least every 0.1 s for the
+     * heartbeat and the loop's reports. */
+    const int n = poll(fds, 2, 100);
+    if (n < 0 && errno != EINTR) {
+      fprintf(stderr, PROG ": poll: %s\n", strerror(errno));
+      code = 1;
+      break;
+    }
+    if (n > 0 && (fds[0].revents & POLLIN) && ndp_handle(lcm, 0.0) != 0) {
+      fprintf(stderr, PROG ": LCM receive failed: %s\n", strerror(errno));
+      code = 1;
+      break;
+    }
+    if (n > 0 && (fds[1].revents & POLLIN)) {
+      uint64_t rings;
+      if (read(io.bell, &rings, sizeof rings) < 0) {
+      }
+    }
+    const int np = publish_ring(lcm, &c);
+    if (np < 0 && !pub_failing) fprintf(stderr, PROG ": lcm_publish of EE_CMD failed\n");
+    pub_failing = np < 0;
+    if (nd_mailbox_take(&io.report, &v_rep, &rep, (int)sizeof rep) == (int)sizeof rep) {
+      note_report(&c, &rep, &last);
+      loop = rep.loop;
+      c.st.state = rep.mode < 0 ? "waiting" : nd_exec_mode_name(rep.mode);
+      c.st.rejected = c.refused_state + c.refused_plan + rep.refused;
+    }
+    const uint64_t drops = atomic_load(&io.ring.dropped);
+    if (drops != drops_seen) {
+      fprintf(stderr, PROG ": %llu setpoints dropped: publishing fell behind the loop\n",
+              (unsigned long long)(drops - drops_seen));
+      drops_seen = drops;
+    }
+    if (ndp_status_tick(lcm, &c.st, 0) < 0)
+      fprintf(stderr, PROG ": lcm_publish of STATUS failed\n");
+  }
+
+  atomic_store(&io.stop, 1);
+  pthread_join(tid, NULL);
+  publish_ring(lcm, &c);
+  if (nd_mailbox_take(&io.report, &v_rep, &rep, (int)sizeof rep) == (int)sizeof rep) {
+    loop = rep.loop;
+    c.st.state = rep.mode < 0 ? "waiting" : nd_exec_mode_name(rep.mode);
+    c.st.rejected = c.refused_state + c.refused_plan + rep.refused;
+    last = rep;
+  }
+  ndp_status_tick(lcm, &c.st, 1);
+  fprintf(stderr,
+          PROG ": stopped after %lld cycles, %lld setpoints; period error p50 %d us, p99 %d "
+               "us, max %d us; %lld overruns (%lld deadlines skipped); %llu ring drops; "
+               "max publish backlog %d; plans %lld taken, %lld refused\n",
+          (long long)last.cycles, (long long)last.sent, loop.p50_us, loop.p99_us,
+          loop.max_us, (long long)loop.overruns, (long long)last.missed,
+          (unsigned long long)drops_seen, c.backlog_max, (long long)last.accepted,
+          (long long)last.refused);
+  close(io.bell);
+  nudge_robot_state_t_unsubscribe(lcm, sub_state);
+  nudge_plan_t_unsubscribe(lcm, sub_plan);
+  lcm_destroy(lcm);
+  return code;
+}
