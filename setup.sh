@@ -8,7 +8,8 @@ usage() {
   cat <<'USAGE'
 usage: ./setup.sh [COMMAND] [ARGS...]
 
-  demo [ARGS]   set up, build, and run the pushing demo (ARGS go to the demo)
+  demo [ARGS]   set up, build, and run the process system pushing the object to 5 goals
+                in emulation (nudge-up demo; ARGS go to it, see build/bin/nudge-up --help)
   test          set up, build, and run every test (ctest)
   test-asan     set up, build with AddressSanitizer + UBSan into build-asan/, run the unit tests
   build         set up and build only (the default)
@@ -30,8 +31,10 @@ root=$(cd "$(dirname "$0")" && pwd)
 cd "$root"
 
 # Debian packages the build, the tests and the tools need.
-packages=(build-essential cmake pkg-config libmujoco-dev liblcm-dev liblcm-bin liblcm-java
-          libqhull-dev libcmocka-dev zlib1g-dev default-jdk-headless iproute2 util-linux)
+# libqhull-dev: MuJoCo's CMake config names its headers; libjchart2d-java: lcm-spy's charts.
+packages=(build-essential cmake pkg-config libmujoco-dev libqhull-dev liblcm-dev liblcm-bin
+          liblcm-java libjchart2d-java default-jdk-headless libcmocka-dev zlib1g-dev iproute2
+          util-linux procps)
 
 missing=()
 for p in "${packages[@]}"; do
@@ -59,7 +62,15 @@ build() { # build DIR [cmake args...]
 
 case "$cmd" in
   build) build build ;;
-  demo) build build; exec "$root/build/bin/nudge-demo" "$@" ;;
+  demo)
+    build build
+    if ip route get 239.255.76.67 >/dev/null 2>&1; then
+      exec "$root/build/bin/nudge-up" demo "$@"
+    fi
+    # No multicast route (an isolated machine): LCM cannot open on the host, so run the
+    # demo in a private network namespace where loopback carries it.
+    echo "setup.sh: no multicast route on this host; running the demo in a private network namespace" >&2
+    exec "$root/tests/netns-run" "$root/build/bin/nudge-up" demo "$@" ;;
   test) build build; cd build && exec ctest --output-on-failure -j 2 ;;
   test-asan)
     build build-asan -DNUDGE_SANITIZE=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo

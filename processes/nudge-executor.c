@@ -350,7 +350,15 @@ static void on_plan(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_plan
   in.t_arrive = ndp_mono();
   in.plan_id = msg->plan_id;
   memcpy(in.key, msg->keypoints[0], sizeof in.key);
-  in.T = msg->T;
+  /* The planner's rollouts reach keypoint 0 at state_utime + T. The plan arrives a planning
+   * time later, so the segment is shortened by that age to keep the keypoint where the
+   * planner put it in time; otherwise every plan would push the target further out and a
+   * robot re-planned at 10-20 Hz would creep. Wall clocks of two hosts need to be synced
+   * for this (same host here); the clamp to T/2 bounds the harm of a skewed clock. */
+  double age = 1e-6 * (double)(ndp_utime() - msg->state_utime);
+  if (!(age > 0.0)) age = 0.0;
+  if (age > 0.5 * msg->T) age = 0.5 * msg->T;
+  in.T = msg->T - age;
   nd_mailbox_post(&c->io->plan, &in, (int)sizeof(in));
 }
 
