@@ -207,6 +207,14 @@ static int resolve(nds_model *nm, const char *what, char *err, int errlen) {
     return -1;
   }
   nm->ee_height = m->body_pos[3 * nm->ee_body + 2];
+  const int b = nm->ee_body;
+  nm->ee_mass0 = m->body_mass[b];
+  for (int k = 0; k < 3; k++) nm->ee_inertia0[k] = m->body_inertia[3 * b + k];
+  for (int k = 0; k < 2; k++) {
+    nm->ee_body_invw0[k] = m->body_invweight0[2 * b + k];
+    nm->ee_dof_invw0[k] = m->dof_invweight0[nm->ee_dof[k]];
+    nm->ee_dof_M0[k] = m->dof_M0[nm->ee_dof[k]];
+  }
   return 0;
 }
 
@@ -313,10 +321,12 @@ int nds_theta_apply(nds_model *nm, const double theta[NDS_NTHETA], char *err, in
     m->geom_friction[3 * g + 2] = theta[NDS_TH_ROLL];
   }
 
+  /* Scaled from the values as loaded, not from the current ones: repeated applications
+   * would otherwise accumulate rounding and theta would not fix the model's bits. */
   int b = nm->ee_body;
-  double s = theta[NDS_TH_MASS] / m->body_mass[b];
+  double s = theta[NDS_TH_MASS] / nm->ee_mass0;
   m->body_mass[b] = theta[NDS_TH_MASS];
-  for (int k = 0; k < 3; k++) m->body_inertia[3 * b + k] *= s;
+  for (int k = 0; k < 3; k++) m->body_inertia[3 * b + k] = nm->ee_inertia0[k] * s;
 
   /* What mj_setConst derives from the masses, updated without an mjData: the subtree
    * masses (mj_comPos divides by them) and the inverse weights that scale contact
@@ -325,11 +335,10 @@ int nds_theta_apply(nds_model *nm, const double theta[NDS_NTHETA], char *err, in
   for (int i = 0; i < m->nbody; i++) m->body_subtreemass[i] = m->body_mass[i];
   for (int i = m->nbody - 1; i > 0; i--)
     m->body_subtreemass[m->body_parentid[i]] += m->body_subtreemass[i];
-  m->body_invweight0[2 * b + 0] /= s;
-  m->body_invweight0[2 * b + 1] /= s;
   for (int k = 0; k < 2; k++) {
-    m->dof_invweight0[nm->ee_dof[k]] /= s;
-    m->dof_M0[nm->ee_dof[k]] *= s;
+    m->body_invweight0[2 * b + k] = nm->ee_body_invw0[k] / s;
+    m->dof_invweight0[nm->ee_dof[k]] = nm->ee_dof_invw0[k] / s;
+    m->dof_M0[nm->ee_dof[k]] = nm->ee_dof_M0[k] * s;
   }
 
   memcpy(nm->cfg.theta, theta, sizeof(nm->cfg.theta));

@@ -38,6 +38,9 @@ typedef struct {
   int obj_qpos, obj_dof;  /* free joint: qpos 7 (pos, w-first quat), dof 6 */
   int ee_qpos[2], ee_dof[2];
   double ee_height;       /* z of the sphere centre */
+  /* The sphere's mass-dependent model values as loaded: nds_theta_apply sets them from
+   * these, so applying a theta gives the same bits whatever was applied before. */
+  double ee_mass0, ee_inertia0[3], ee_body_invw0[2], ee_dof_invw0[2], ee_dof_M0[2];
 } nds_model;
 
 /* Check cfg: finite positive sizes and masses, timestep in (0, 0.05] s, condim 3, 4 or 6,

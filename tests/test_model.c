@@ -170,6 +170,36 @@ static void test_theta_apply_matches_build(void **state) {
   nds_model_free(&b);
 }
 
+/* theta fixes the model's bits: applying other values first and then theta gives exactly
+ * what applying theta once gives (parameter fits rely on it: a worker's model holds
+ * whatever the previous candidate left). */
+static void test_theta_apply_idempotent(void **state) {
+  (void)state;
+  nds_scene_cfg cfg;
+  nds_scene_cfg_default(&cfg);
+  nds_model a, b;
+  build(&a, &cfg);
+  build(&b, &cfg);
+  char err[256];
+  const double th[NDS_NTHETA] = {0.9, 0.004, 0.0002, 1.37};
+  assert_int_equal(nds_theta_apply(&a, th, err, sizeof(err)), 0);
+  for (int i = 0; i < 100; i++) {
+    const double other[NDS_NTHETA] = {0.3 + 0.01 * i, 0.001 * i, 1e-5 * i, 0.2 + 0.037 * i};
+    assert_int_equal(nds_theta_apply(&b, other, err, sizeof(err)), 0);
+    assert_int_equal(nds_theta_apply(&b, th, err, sizeof(err)), 0);
+  }
+  const mjModel *ma = a.m, *mb = b.m;
+  assert_memory_equal(ma->body_mass, mb->body_mass, sizeof(mjtNum) * ma->nbody);
+  assert_memory_equal(ma->body_inertia, mb->body_inertia, sizeof(mjtNum) * 3 * ma->nbody);
+  assert_memory_equal(ma->body_subtreemass, mb->body_subtreemass, sizeof(mjtNum) * ma->nbody);
+  assert_memory_equal(ma->body_invweight0, mb->body_invweight0, sizeof(mjtNum) * 2 * ma->nbody);
+  assert_memory_equal(ma->dof_invweight0, mb->dof_invweight0, sizeof(mjtNum) * ma->nv);
+  assert_memory_equal(ma->dof_M0, mb->dof_M0, sizeof(mjtNum) * ma->nv);
+  assert_memory_equal(ma->geom_friction, mb->geom_friction, sizeof(mjtNum) * 3 * ma->ngeom);
+  nds_model_free(&a);
+  nds_model_free(&b);
+}
+
 static void test_copy_is_independent(void **state) {
   (void)state;
   nds_model a, b;
@@ -468,6 +498,7 @@ int main(void) {
       cmocka_unit_test(test_bad_cfg_rejected),
       cmocka_unit_test(test_bad_theta_rejected),
       cmocka_unit_test(test_theta_apply_matches_build),
+      cmocka_unit_test(test_theta_apply_idempotent),
       cmocka_unit_test(test_copy_is_independent),
       cmocka_unit_test(test_mass_changes_response),
       cmocka_unit_test(test_rest_is_stable),

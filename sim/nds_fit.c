@@ -1,0 +1,495 @@
+/* nds_fit: CEM over theta, scoring candidates by replaying the buffer on the pool.
+ *
+ * The optimiser works on theta / sigma0 per fitted parameter. Plain CEM is indifferent to
+ * a per-coordinate scale, but the parameters span four decades (sliding ~1, rolling
+ * ~1e-4), and nd_cem's one std floor and one bound tolerance are then meaningful for all
+ * of them alike. */
+#include "nds_fit.h"
+
+#include <math.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "nd_cem.h"
+
+/* The weights of L (the paper does not give them legibly).
+ * k1 = 1: the sphere's path is as much an observation as the object's, and in force mode
+ * it is what the sphere mass and the contact forces show in first.
+ * k2 = 1e-3 m^2/rad: L_rot,o is a mean absolute angle (linear in the error), the position
+ * terms mean squares. A yaw error phi moves the box's corners by r phi (r = 5.8 cm, the
+ * half diagonal), i.e. r^2 phi^2 = 3.4e-3 phi^2 m^2; k2 phi equals that at phi = 0.3 rad
+ * and stays below it for larger errors, so yaw counts about as much as the corner error it
+ * causes for the errors a poor torsional friction gives (0.1-0.3 rad), while near the fit
+ * its linear slope keeps rotation informative where the squared terms flatten out. One
+ * radian then weighs as (3.2 cm)^2 of position error. */
+#define NDS_FIT_K1 1.0
+#define NDS_FIT_K2 1e-3
+
+/* The std floor, in units of sigma0. Plain CEM with C = 2 and rho = 0.2 shrinks the std
+ * to ~0.47 of itself per iteration while the optimum lies outside the samples, so from
+ * the paper's prior (sigma0 = 2 D theta / 16) its mean travels at most ~2.6 sigma0 in all
+ * (0.33 for sliding friction at D = 1), and a warm-started std has collapsed after a run or
+ * two: the fit then freezes wherever it stands. With the floor each iteration moves the
+ * mean up to ~1.4 floor sigma0 toward a better fit (measured on three 1.5 s pushes, Q 16,
+ * C 3: from mu0 = 0.52, 0.21 to within 3% of the true sliding friction in 2-3 refits, where
+ * plain CEM stops at 0.66 and 0.36); the price is a mean that keeps wandering by
+ * ~0.2 sigma0 around the optimum (+-3% of sliding friction at D = 1, +-0.6% at D = 0.2). */
+#define NDS_FIT_STD_FLOOR 0.5
+
+/* Default prior width: the paper's smaller uncertainty, D = 0.2. */
+#define NDS_FIT_D_DEFAULT 0.2
+
+struct nds_fit {
+  nds_fit_cfg cfg;
+  nd_pool *pool;
+  int nworkers;
+  nds_model proto;      /* the model as given, for checking records against it */
+  nds_model *models;    /* one per worker */
+  mjData **data;
+  double *cur;          /* nworkers x NDS_NTHETA: theta each worker's model holds, NaN none */
+  nd_cem *cem;
+  nd_rng rng;
+  int nfit, idx[NDS_NTHETA];  /* fitted parameters, in theta order */
+  double scale[NDS_NTHETA];   /* sigma0 of each fitted parameter (CEM space = theta / scale) */
+  double hold[NDS_NTHETA];    /* the full theta; fitted entries are overwritten per candidate */
+
+  int cand_cap;         /* rows of theta: nd_cem_max_batch */
+  double *theta;        /* cand_cap x NDS_NTHETA candidates of the current batch */
+  size_t terms_cap;
+  nds_replay_terms *terms;  /* cand x rollout, candidate-major */
+
+  /* The current batch, read by the tasks. */
+  const nd_rollout *rs;
+  int nr;
+  int task_err;         /* a task could not replay (only on a record changed under us) */
+
+  /* Pruning (cfg.prune): a candidate is dropped once the L of its finished and running
+   * replays already exceeds the nelite-th best complete total of the batch. */
+  int nelite;           /* as nd_cem counts them */
+  int bounded;          /* this batch may prune (CEM iterations, not single evaluations) */
+  pthread_mutex_t lock; /* guards the fields below during a batch */
+  double *done;         /* cand_cap: L of each candidate's finished replays (any order) */
+  int *left;            /* cand_cap: replays not yet finished */
+  unsigned char *cut;   /* cand_cap: candidate dropped */
+  double *top;          /* nelite smallest complete totals, ascending */
+  int *order;           /* cand_cap: candidates in the order their replays are handed out */
+  int ntop;
+  int nrun;             /* replays run in the batch */
+  int lock_init;
+};
+
+void nds_fit_cfg_default(nds_fit_cfg *cfg) {
+  memset(cfg, 0, sizeof(*cfg));
+  cfg->pop = 32;
+  cfg->iters = 2;
+  cfg->elite_frac = 0.2;
+  cfg->fit[NDS_TH_SLIDE] = cfg->fit[NDS_TH_TORSION] = cfg->fit[NDS_TH_ROLL] = 1;
+  cfg->fit[NDS_TH_MASS] = 0;
+  cfg->lower = 1e-7;
+  for (int i = 0; i < NDS_NTHETA; i++) {
+    double th = nds_theta_true[i], D = NDS_FIT_D_DEFAULT;
+    cfg->mu0[i] = th;
+    cfg->sigma0[i] = (th + D * th - fmax(cfg->lower, th - D * th)) / 16;
+  }
+  cfg->std_floor = NDS_FIT_STD_FLOOR;
+  cfg->k1 = NDS_FIT_K1;
+  cfg->k2 = NDS_FIT_K2;
+  cfg->prune = 1;
+  nds_ctrl_cfg_default(&cfg->ctrl);
+  cfg->seed = 1;
+}
+
+void nds_fit_paper_prior(const double theta[NDS_NTHETA], double D, double lower, nd_rng *r,
+                         double mu0[NDS_NTHETA], double sigma0[NDS_NTHETA]) {
+  for (int i = 0; i < NDS_NTHETA; i++) {
+    double th = theta[i], lo = th - D * th, hi = th + D * th;
+    double u = nd_rng_uniform(r);
+    mu0[i] = fmax(lower, lo + u * (hi - lo));
+    sigma0[i] = (hi - fmax(lower, lo)) / 16;
+  }
+}
+
+static const char *pname[NDS_NTHETA] = {"slide", "torsion", "roll", "mass"};
+
+int nds_fit_cfg_check(const nds_fit_cfg *c, char *err, int errlen) {
+  const char *bad = NULL;
+  if (c->pop < 2) bad = "pop (Q) must be >= 2";
+  else if (c->iters < 1 || c->iters > NDS_FIT_MAX_ITERS) bad = "iters (C) must be in [1, 16]";
+  else if (!(c->elite_frac > 0 && c->elite_frac <= 1)) bad = "elite_frac must be in (0, 1]";
+  else if (!(isfinite(c->lower) && c->lower > 0)) bad = "lower must be finite and > 0";
+  else if (!(isfinite(c->std_floor) && c->std_floor >= 0)) bad = "std_floor must be finite and >= 0";
+  else if (!(isfinite(c->k1) && c->k1 >= 0)) bad = "k1 must be finite and >= 0";
+  else if (!(isfinite(c->k2) && c->k2 >= 0)) bad = "k2 must be finite and >= 0";
+  else if (c->prune != 0 && c->prune != 1) bad = "prune must be 0 or 1";
+  if (bad) {
+    snprintf(err, errlen, "fit: %s", bad);
+    return -1;
+  }
+  int nfit = 0;
+  for (int i = 0; i < NDS_NTHETA; i++) {
+    if (c->fit[i] != 0 && c->fit[i] != 1) {
+      snprintf(err, errlen, "fit: fit[%d] (%s) = %d, must be 0 or 1", i, pname[i], c->fit[i]);
+      return -1;
+    }
+    nfit += c->fit[i];
+    if (c->fit[i] && !(isfinite(c->mu0[i]) && isfinite(c->sigma0[i]) && c->sigma0[i] > 0)) {
+      snprintf(err, errlen, "fit: %s prior mu0 = %g, sigma0 = %g: need finite, sigma0 > 0",
+               pname[i], c->mu0[i], c->sigma0[i]);
+      return -1;
+    }
+  }
+  if (nfit == 0) {
+    snprintf(err, errlen, "fit: no parameter is fitted");
+    return -1;
+  }
+  /* What the first candidate sees: fitted entries at their clipped prior mean. */
+  double th[NDS_NTHETA];
+  for (int i = 0; i < NDS_NTHETA; i++) th[i] = c->fit[i] ? fmax(c->lower, c->mu0[i]) : c->mu0[i];
+  char terr[160];
+  if (nds_theta_check(th, terr, sizeof(terr))) {
+    snprintf(err, errlen, "fit: prior mean: %s", terr);
+    return -1;
+  }
+  return 0;
+}
+
+void nds_fit_free(nds_fit *f) {
+  if (!f) return;
+  for (int w = 0; w < f->nworkers; w++) {
+    if (f->data && f->data[w]) mj_deleteData(f->data[w]);
+    if (f->models) nds_model_free(&f->models[w]);
+  }
+  nds_model_free(&f->proto);
+  free(f->data);
+  free(f->models);
+  free(f->cur);
+  nd_cem_free(f->cem);
+  free(f->theta);
+  free(f->terms);
+  free(f->done);
+  free(f->left);
+  free(f->cut);
+  free(f->top);
+  free(f->order);
+  if (f->lock_init) pthread_mutex_destroy(&f->lock);
+  free(f);
+}
+
+nds_fit *nds_fit_create(const nds_model *proto, const nds_fit_cfg *cfg, nd_pool *pool,
+                        char *err, int errlen) {
+  if (nds_fit_cfg_check(cfg, err, errlen)) return NULL;
+  nds_fit *f = calloc(1, sizeof(*f));
+  if (!f) goto oom;
+  f->cfg = *cfg;
+  f->pool = pool;
+  if (nds_model_copy(&f->proto, proto, err, errlen)) {
+    nds_fit_free(f);
+    return NULL;
+  }
+  f->nworkers = nd_pool_size(pool);
+  f->models = calloc(f->nworkers, sizeof(*f->models));
+  f->data = calloc(f->nworkers, sizeof(*f->data));
+  f->cur = malloc(sizeof(double) * NDS_NTHETA * f->nworkers);
+  if (!f->models || !f->data || !f->cur) goto oom;
+  for (int w = 0; w < f->nworkers; w++) {
+    if (nds_model_copy(&f->models[w], proto, err, errlen)) {
+      nds_fit_free(f);
+      return NULL;
+    }
+    f->data[w] = mj_makeData(f->models[w].m);
+    if (!f->data[w]) goto oom;
+    for (int i = 0; i < NDS_NTHETA; i++) f->cur[NDS_NTHETA * w + i] = NAN;
+  }
+
+  double lower[NDS_NTHETA];
+  for (int i = 0; i < NDS_NTHETA; i++) {
+    if (!cfg->fit[i]) continue;
+    f->idx[f->nfit] = i;
+    f->scale[f->nfit] = cfg->sigma0[i];
+    lower[f->nfit] = cfg->lower / cfg->sigma0[i];
+    f->nfit++;
+  }
+  nd_cem_cfg cc;
+  nd_cem_cfg_default(&cc, 1, f->nfit, cfg->pop, cfg->iters);
+  cc.elite_frac = cfg->elite_frac;
+  cc.std_min = cfg->std_floor;  /* in units of sigma0 */
+  cc.lower = lower;
+  f->cem = nd_cem_create(&cc, err, errlen);
+  if (!f->cem) {
+    nds_fit_free(f);
+    return NULL;
+  }
+  f->cand_cap = nd_cem_max_batch(f->cem) + 1;
+  /* nd_cem's elite count (nd_cem.c): a different count here would prune real elites or
+   * prune less; test_replay checks that pruning changes no result. */
+  f->nelite = (int)(cfg->elite_frac * cfg->pop + 0.5);
+  if (f->nelite < 1) f->nelite = 1;
+  if (f->nelite > cfg->pop) f->nelite = cfg->pop;
+  f->theta = malloc(sizeof(double) * NDS_NTHETA * f->cand_cap);
+  f->done = malloc(sizeof(double) * f->cand_cap);
+  f->left = malloc(sizeof(int) * f->cand_cap);
+  f->cut = malloc(f->cand_cap);
+  f->top = malloc(sizeof(double) * f->nelite);
+  f->order = malloc(sizeof(int) * f->cand_cap);
+  if (!f->theta || !f->done || !f->left || !f->cut || !f->top || !f->order) goto oom;
+  if (pthread_mutex_init(&f->lock, NULL)) goto oom;
+  f->lock_init = 1;
+  nd_rng_seed(&f->rng, cfg->seed, 0);
+  memcpy(f->hold, cfg->mu0, sizeof(f->hold));
+  if (nds_fit_set_dist(f, cfg->mu0, cfg->sigma0, err, errlen)) {
+    nds_fit_free(f);
+    return NULL;
+  }
+  return f;
+oom:
+  snprintf(err, errlen, "fit: out of memory");
+  nds_fit_free(f);
+  return NULL;
+}
+
+int nds_fit_set_dist(nds_fit *f, const double mean[NDS_NTHETA], const double std[NDS_NTHETA],
+                     char *err, int errlen) {
+  double th[NDS_NTHETA], xm[NDS_NTHETA], xs[NDS_NTHETA];
+  for (int i = 0; i < NDS_NTHETA; i++) {
+    if (f->cfg.fit[i] && !(isfinite(mean[i]) && isfinite(std[i]) && std[i] >= 0)) {
+      snprintf(err, errlen, "fit: %s mean = %g, std = %g: need finite, std >= 0", pname[i],
+               mean[i], std[i]);
+      return -1;
+    }
+    th[i] = f->cfg.fit[i] ? fmax(f->cfg.lower, mean[i]) : mean[i];
+  }
+  char terr[160];
+  if (nds_theta_check(th, terr, sizeof(terr))) {
+    snprintf(err, errlen, "fit: distribution mean: %s", terr);
+    return -1;
+  }
+  for (int j = 0; j < f->nfit; j++) {
+    xm[j] = mean[f->idx[j]] / f->scale[j];
+    xs[j] = std[f->idx[j]] / f->scale[j];
+  }
+  nd_cem_set_dist(f->cem, xm, xs);
+  for (int i = 0; i < NDS_NTHETA; i++)
+    if (!f->cfg.fit[i]) f->hold[i] = mean[i];
+  return 0;
+}
+
+void nds_fit_dist(const nds_fit *f, double mean[NDS_NTHETA], double std[NDS_NTHETA]) {
+  const double *xm = nd_cem_mean(f->cem), *xs = nd_cem_std(f->cem);
+  for (int i = 0; i < NDS_NTHETA; i++) {
+    mean[i] = f->hold[i];
+    std[i] = 0;
+  }
+  for (int j = 0; j < f->nfit; j++) {
+    mean[f->idx[j]] = xm[j] * f->scale[j];
+    std[f->idx[j]] = xs[j] * f->scale[j];
+  }
+}
+
+/* Candidate theta of CEM point x: held entries, fitted ones scaled back (and kept at
+ * lower, which the product may miss by a rounding). */
+static void to_theta(const nds_fit *f, const double *x, double *th) {
+  memcpy(th, f->hold, sizeof(double) * NDS_NTHETA);
+  for (int j = 0; j < f->nfit; j++) th[f->idx[j]] = fmax(f->cfg.lower, x[j] * f->scale[j]);
+}
+
+/* Put candidate c's complete total L into the nelite best of the batch (under lock). */
+static void top_insert(nds_fit *f, double L) {
+  int i;
+  if (f->ntop < f->nelite) i = f->ntop++;
+  else if (L < f->top[f->nelite - 1]) i = f->nelite - 1;
+  else return;
+  while (i > 0 && f->top[i - 1] > L) {
+    f->top[i] = f->top[i - 1];
+    i--;
+  }
+  f->top[i] = L;
+}
+
+/* One (candidate, rollout) replay.
+ *
+ * A worker's model must hold exactly the candidate's theta; nds_theta_apply sets every
+ * theta-dependent value from the model as loaded, so the result does not depend on which
+ * candidates the worker ran before. Skipped when it already holds this very theta.
+ *
+ * Pruning. Once nelite candidates of the batch are complete, the nelite-th best total T*
+ * bounds the elites from above: the nelite best of the whole batch are at most T*. A
+ * replay whose candidate's L so far (finished replays plus this one's running sums, which
+ * only grow) passes T* (with a 1e-9 relative margin for summation order) therefore belongs
+ * to a candidate that is no elite, whatever remains; it stops, and the candidate's other
+ * replays are skipped. Its cost becomes +inf. Elites are never pruned and their costs are
+ * exact, so nd_cem selects and updates exactly as without pruning: the results do not
+ * depend on the timing that decides what gets pruned. */
+static void replay_task(void *ctx, int task, int worker) {
+  nds_fit *f = ctx;
+  int c = f->order[task / f->nr], r = task % f->nr;
+  nds_replay_terms *out = &f->terms[(size_t)c * f->nr + r];
+  double bound = INFINITY;
+  pthread_mutex_lock(&f->lock);
+  int skip = f->bounded && f->cut[c];
+  if (f->bounded && !skip && f->ntop == f->nelite)
+    bound = f->top[f->nelite - 1] * (1 + 1e-9) - f->done[c];
+  f->nrun += !skip;
+  pthread_mutex_unlock(&f->lock);
+
+  char err[160];
+  int failed = 0;
+  if (skip) {
+    memset(out, 0, sizeof(*out));
+    out->cut = 1;
+  } else {
+    const double *th = f->theta + (size_t)NDS_NTHETA * c;
+    double *cur = f->cur + (size_t)NDS_NTHETA * worker;
+    nds_model *nm = &f->models[worker];
+    int ok = 1;
+    if (memcmp(cur, th, sizeof(double) * NDS_NTHETA) != 0) {
+      ok = nds_theta_apply(nm, th, err, sizeof(err)) == 0;
+      for (int i = 0; i < NDS_NTHETA; i++) cur[i] = ok ? th[i] : NAN;
+    }
+    if (!ok) {
+      memset(out, 0, sizeof(*out));
+      out->pos_o = out->pos_ee = out->rot_o = NDS_REPLAY_DIVERGED;
+      out->diverged = 1;
+    } else if (nds_replay_bounded(nm, f->data[worker], &f->cfg.ctrl, &f->rs[r], f->cfg.k1,
+                                  f->cfg.k2, bound, out, err, sizeof(err))) {
+      failed = 1;
+    }
+  }
+
+  pthread_mutex_lock(&f->lock);
+  f->task_err |= failed;
+  if (f->bounded) {
+    f->done[c] += nds_replay_loss(out, f->cfg.k1, f->cfg.k2);
+    if (out->cut) f->cut[c] = 1;
+    if (--f->left[c] == 0 && !f->cut[c]) top_insert(f, f->done[c]);
+  }
+  pthread_mutex_unlock(&f->lock);
+}
+
+/* Make room for ncand x nr terms. */
+static int reserve(nds_fit *f, int nr, char *err, int errlen) {
+  size_t need = (size_t)f->cand_cap * nr;
+  if (need <= f->terms_cap) return 0;
+  nds_replay_terms *t = realloc(f->terms, need * sizeof(*t));
+  if (!t) {
+    snprintf(err, errlen, "fit: out of memory for %d rollouts", nr);
+    return -1;
+  }
+  f->terms = t;
+  f->terms_cap = need;
+  return 0;
+}
+
+/* Replay f->theta[0, ncand) on the current buffer (pruning if bounded); loss[c] sums each
+ * candidate's rollouts in buffer order, so the result does not depend on which worker ran
+ * what. Pruned candidates get +inf. */
+static void eval_batch(nds_fit *f, int ncand, int bounded, double *loss) {
+  f->bounded = bounded && f->cfg.prune && ncand > f->nelite;
+  f->ntop = 0;
+  for (int c = 0; c < ncand; c++) {
+    f->done[c] = 0;
+    f->left[c] = f->nr;
+    f->cut[c] = 0;
+    f->order[c] = c;
+  }
+  if (f->bounded) {
+    /* Candidates nearest the sampling mean first: near convergence they are the likely
+     * elites, and the sooner good totals are complete the tighter the pruning bound. The
+     * order changes only what is pruned, never a result. */
+    const double *xm = nd_cem_mean(f->cem);
+    for (int c = 0; c < ncand; c++) {
+      double d2 = 0;
+      for (int j = 0; j < f->nfit; j++) {
+        double e = f->theta[NDS_NTHETA * c + f->idx[j]] / f->scale[j] - xm[j];
+        d2 += e * e;
+      }
+      f->done[c] = d2;  /* scratch until the pool runs */
+    }
+    for (int i = 1; i < ncand; i++) {
+      int v = f->order[i], j = i - 1;
+      while (j >= 0 && f->done[f->order[j]] > f->done[v]) {
+        f->order[j + 1] = f->order[j];
+        j--;
+      }
+      f->order[j + 1] = v;
+    }
+    for (int c = 0; c < ncand; c++) f->done[c] = 0;
+  }
+  nd_pool_run(f->pool, ncand * f->nr, replay_task, f);
+  for (int c = 0; c < ncand; c++) {
+    double L = 0;
+    for (int r = 0; r < f->nr; r++)
+      L += nds_replay_loss(&f->terms[(size_t)c * f->nr + r], f->cfg.k1, f->cfg.k2);
+    loss[c] = f->cut[c] ? INFINITY : L;
+  }
+}
+
+static int cem_cost(void *ctx, const double *x, int n, double *cost) {
+  nds_fit *f = ctx;
+  for (int c = 0; c < n; c++) to_theta(f, x + (size_t)c * f->nfit, f->theta + NDS_NTHETA * c);
+  eval_batch(f, n, 1, cost);
+  return f->task_err;
+}
+
+static int check_buffer(nds_fit *f, const nd_rollout *rs, int n, char *err, int errlen) {
+  if (n < 1 || !rs) {
+    snprintf(err, errlen, "fit: empty rollout buffer");
+    return -1;
+  }
+  for (int i = 0; i < n; i++) {
+    char rerr[200];
+    if (nds_replay_check(&f->proto, &rs[i], rerr, sizeof(rerr))) {
+      snprintf(err, errlen, "fit: rollout %d: %s", i, rerr);
+      return -1;
+    }
+  }
+  return reserve(f, n, err, errlen);
+}
+
+int nds_fit_loss(nds_fit *f, const double theta[NDS_NTHETA], const nd_rollout *rs, int n,
+                 double *loss, nds_replay_terms *per, char *err, int errlen) {
+  if (nds_theta_check(theta, err, errlen) || check_buffer(f, rs, n, err, errlen)) return -1;
+  f->rs = rs;
+  f->nr = n;
+  f->task_err = 0;
+  memcpy(f->theta, theta, sizeof(double) * NDS_NTHETA);
+  f->nrun = 0;
+  eval_batch(f, 1, 0, loss);
+  if (per) memcpy(per, f->terms, sizeof(*per) * n);
+  return 0;
+}
+
+int nds_fit_run(nds_fit *f, const nd_rollout *rs, int n, nds_fit_out *out, char *err,
+                int errlen) {
+  if (check_buffer(f, rs, n, err, errlen)) return -1;
+  f->rs = rs;
+  f->nr = n;
+  f->task_err = 0;
+  f->nrun = 0;
+
+  /* A failed run must leave the distribution and the generator as they were. */
+  double m0[NDS_NTHETA], s0[NDS_NTHETA];
+  memcpy(m0, nd_cem_mean(f->cem), sizeof(double) * f->nfit);
+  memcpy(s0, nd_cem_std(f->cem), sizeof(double) * f->nfit);
+  nd_rng r0 = f->rng;
+  if (nd_cem_run(f->cem, &f->rng, cem_cost, f)) {
+    nd_cem_set_dist(f->cem, m0, s0);
+    f->rng = r0;
+    snprintf(err, errlen, "fit: a record could not be replayed");
+    return -1;
+  }
+
+  memset(out, 0, sizeof(*out));
+  nds_fit_dist(f, out->mean, out->std);
+  to_theta(f, nd_cem_best(f->cem), out->best);
+  out->best_loss = nd_cem_best_cost(f->cem);
+  out->iters = f->cfg.iters;
+  for (int i = 0; i < out->iters; i++) out->iter_best[i] = nd_cem_iter_best(f->cem, i);
+
+  memcpy(f->theta, out->mean, sizeof(out->mean));
+  eval_batch(f, 1, 0, &out->loss_mean);
+  for (int r = 0; r < n; r++) out->diverged_mean += f->terms[r].diverged;
+  out->replays = f->nrun;
+  return 0;
+}

@@ -1,0 +1,97 @@
+/* nds_fit: fitting theta to recorded rollouts with CEM (paper sec. III-C, DESIGN.md sec. 4).
+ *
+ * Each candidate theta is scored by replaying every rollout of the buffer (nds_replay)
+ * and summing the rollouts' L = L_pos,o + k1 L_pos,ee + k2 L_rot,o. The optimiser is the
+ * project's nd_cem in its plain configuration: white Gaussian noise per parameter, no
+ * elites kept, no population decay, no momentum, no injected mean; only a floor on the std
+ * (std_floor, see nds_fit.c). Kept elites would carry costs measured on an older buffer
+ * into the next refit, and with C = 2 the extra evaluations buy little.
+ *
+ * The distribution persists between runs: create sets it to the prior (mu0, sigma0),
+ * each nds_fit_run goes on from where the last ended (the incremental loop's warm start
+ * across episodes), nds_fit_set_dist replaces it. The (candidate, rollout) replays of an
+ * iteration are spread over the pool, each worker with its own model copy and mjData;
+ * results do not depend on the pool's size. Parameters not fitted are held fixed. */
+#ifndef NDS_FIT_H
+#define NDS_FIT_H
+
+#include <stdint.h>
+
+#include "nd_pool.h"
+#include "nd_rng.h"
+#include "nds_replay.h"
+
+#define NDS_FIT_MAX_ITERS 16
+
+typedef struct {
+  int pop, iters;              /* Q >= 2 candidates, C in [1, NDS_FIT_MAX_ITERS] iterations */
+  double elite_frac;           /* rho in (0, 1] */
+  int fit[NDS_NTHETA];         /* 1: fitted, 0: held at mu0 (at least one fitted) */
+  double mu0[NDS_NTHETA];      /* prior mean; a held parameter's value */
+  double sigma0[NDS_NTHETA];   /* prior std, > 0 where fitted */
+  double lower;                /* every fitted parameter stays >= lower > 0 (samples clipped) */
+  double std_floor;            /* std never falls below std_floor * sigma0 (0: the paper's
+                                  plain CEM, which freezes after a run or two) */
+  double k1, k2;               /* weights of L_pos,ee (1) and L_rot,o (m^2/rad) */
+  int prune;                   /* 1: stop replaying a candidate once it cannot be an elite
+                                  (same results, less work: see nds_fit.c); 0: replay all */
+  nds_ctrl_cfg ctrl;           /* the velocity controller of velocity-mode replays */
+  uint64_t seed;
+} nds_fit_cfg;
+
+/* Paper settings: Q 32, C 2, rho 0.2, fitting the three frictions with the mass held;
+ * prior at nds_theta_true with the paper's D = 0.2 std; lower 1e-7; std_floor 0.5;
+ * k1 = 1, k2 = 1e-3 m^2/rad (reasons in nds_fit.c); prune; default controller; seed 1. */
+void nds_fit_cfg_default(nds_fit_cfg *cfg);
+
+/* Check cfg. Return 0, or -1 naming the bad field. */
+int nds_fit_cfg_check(const nds_fit_cfg *cfg, char *err, int errlen);
+
+/* The paper's prior around theta for uncertainty D > 0: mu0 ~ U(theta - D theta,
+ * theta + D theta) (clipped at lower), sigma0 = (theta + D theta - max(lower,
+ * theta - D theta)) / 16, for all NDS_NTHETA entries (four draws from r, in order). */
+void nds_fit_paper_prior(const double theta[NDS_NTHETA], double D, double lower, nd_rng *r,
+                         double mu0[NDS_NTHETA], double sigma0[NDS_NTHETA]);
+
+typedef struct {
+  double mean[NDS_NTHETA];     /* distribution after the run; held parameters: their value */
+  double std[NDS_NTHETA];      /* held parameters: 0 */
+  double best[NDS_NTHETA];     /* lowest-loss candidate of the run */
+  double best_loss;
+  double loss_mean;            /* L(mean) on the buffer, evaluated after the last update */
+  int diverged_mean;           /* replays of the mean that diverged */
+  int iters;
+  double iter_best[NDS_FIT_MAX_ITERS]; /* lowest L of each iteration */
+  int replays;                 /* rollout replays started (pruned ones too), the mean's
+                                  included; depends on timing when pruning */
+} nds_fit_out;
+
+typedef struct nds_fit nds_fit;
+
+/* A fit of theta in copies of model proto (its timestep is the replay's) on pool, which
+ * the fit uses only inside its calls. NULL and a message on a bad cfg or no memory. */
+nds_fit *nds_fit_create(const nds_model *proto, const nds_fit_cfg *cfg, nd_pool *pool,
+                        char *err, int errlen);
+void nds_fit_free(nds_fit *f);
+
+/* Replace the distribution: full theta vectors; fitted entries need finite mean (clipped
+ * at lower) and finite std >= 0, held entries a valid theta value (std ignored), which
+ * they are held at from now on. Return 0, or -1 with a message (nothing changed). */
+int nds_fit_set_dist(nds_fit *f, const double mean[NDS_NTHETA], const double std[NDS_NTHETA],
+                     char *err, int errlen);
+
+/* The current distribution (held entries: value, std 0). */
+void nds_fit_dist(const nds_fit *f, double mean[NDS_NTHETA], double std[NDS_NTHETA]);
+
+/* C iterations of CEM on the buffer rs[0, n), then L of the resulting mean. Every record
+ * is checked first (nds_replay_check). Allocates only when n exceeds every earlier
+ * buffer. Return 0, or -1 with a message (distribution unchanged, out untouched). */
+int nds_fit_run(nds_fit *f, const nd_rollout *rs, int n, nds_fit_out *out, char *err,
+                int errlen);
+
+/* L(theta) on rs[0, n) in parallel, as the fit scores a candidate (a validation loss).
+ * per, if not NULL, receives each rollout's terms. Return 0, or -1 with a message. */
+int nds_fit_loss(nds_fit *f, const double theta[NDS_NTHETA], const nd_rollout *rs, int n,
+                 double *loss, nds_replay_terms *per, char *err, int errlen);
+
+#endif

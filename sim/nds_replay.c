@@ -1,0 +1,211 @@
+/* nds_replay: open-loop replay of a recorded rollout and its loss terms. */
+#include "nds_replay.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "nd_math.h"
+
+/* As in nds_rollout: every warning counter starts here, so any warning during the replay
+ * (including the one MuJoCo counts again after resetting a bad state) leaves some counter
+ * != WARN_START, and MuJoCo, which prints only at a zero count, stays quiet. */
+#define WARN_START 2
+
+/* A model step may be this far (relative) from k record steps and still count as k:
+ * timesteps written as decimals do not divide exactly in binary. */
+#define RATIO_TOL 1e-9
+
+int nds_replay_ratio(const nds_model *nm, const nd_rollout *r, char *err, int errlen) {
+  if (r->control != ND_CTRL_FORCE && r->control != ND_CTRL_VELOCITY) {
+    snprintf(err, errlen, "replay: unknown control mode %d", (int)r->control);
+    return -1;
+  }
+  if (r->n < 1 || r->n > ND_ROLLOUT_MAX_STEPS) {
+    snprintf(err, errlen, "replay: %d steps, must be in [1, %d]", (int)r->n,
+             ND_ROLLOUT_MAX_STEPS);
+    return -1;
+  }
+  if (!r->u || !r->obj || !r->ee) {
+    snprintf(err, errlen, "replay: record of %d steps has no step arrays", (int)r->n);
+    return -1;
+  }
+  double md = nm->m->opt.timestep;
+  if (!(isfinite(r->dt) && r->dt > 0)) {
+    snprintf(err, errlen, "replay: record dt = %g s, must be finite and > 0", r->dt);
+    return -1;
+  }
+  double q = md / r->dt;
+  long k = lround(q);
+  /* Only whole coarsenings: a finer model would have to invent controls between the
+   * recorded ones, a fractional ratio would have to resample them. */
+  if (k < 1 || fabs(q - (double)k) > RATIO_TOL * q) {
+    snprintf(err, errlen,
+             "replay: model timestep %g s is not a whole multiple of the record's %g s "
+             "(ratio %.6g)",
+             md, r->dt, q);
+    return -1;
+  }
+  if (k > r->n) {
+    snprintf(err, errlen, "replay: record of %d steps is shorter than one model step (%ld)",
+             (int)r->n, k);
+    return -1;
+  }
+  return (int)k;
+}
+
+int nds_replay_check(const nds_model *nm, const nd_rollout *r, char *err, int errlen) {
+  if (nds_replay_ratio(nm, r, err, errlen) < 0) return -1;
+  struct {
+    const char *name;
+    const double *v;
+    int n;
+  } f[] = {{"obj_pos", r->obj_pos, 3}, {"obj_quat", r->obj_quat, 4},
+           {"obj_vel", r->obj_vel, 6}, {"ee_pos", r->ee_pos, 2},
+           {"ee_vel", r->ee_vel, 2},   {"u", r->u, 2 * r->n},
+           {"obj", r->obj, 3 * r->n},  {"ee", r->ee, 2 * r->n}};
+  for (size_t i = 0; i < sizeof(f) / sizeof(f[0]); i++) {
+    for (int j = 0; j < f[i].n; j++) {
+      if (!isfinite(f[i].v[j])) {
+        snprintf(err, errlen, "replay: record %s[%d] = %g is not finite", f[i].name, j,
+                 f[i].v[j]);
+        return -1;
+      }
+    }
+  }
+  const double *qt = r->obj_quat;
+  if (!(qt[0] * qt[0] + qt[1] * qt[1] + qt[2] * qt[2] + qt[3] * qt[3] > 1e-24)) {
+    snprintf(err, errlen, "replay: record obj_quat has zero norm");
+    return -1;
+  }
+  return 0;
+}
+
+void nds_replay_observe(const nds_model *nm, const mjData *d, double obj[3], double ee[2]) {
+  const mjModel *m = nm->m;
+  const mjtNum *q = d->qpos + nm->obj_qpos;
+  obj[0] = q[0];
+  obj[1] = q[1];
+  obj[2] = nd_quat_yaw(q + 3);
+  /* The slide joints move the sphere by (qpos - qpos0) from its body position; the same
+   * offset nds_state_get applies. */
+  for (int k = 0; k < 2; k++)
+    ee[k] = d->qpos[nm->ee_qpos[k]] + m->body_pos[3 * nm->ee_body + k] -
+            m->qpos0[nm->ee_qpos[k]];
+}
+
+void nds_replay_start_get(const nd_rollout *r, nds_state *s) {
+  memcpy(s->obj_pos, r->obj_pos, sizeof(s->obj_pos));
+  memcpy(s->obj_quat, r->obj_quat, sizeof(s->obj_quat));
+  memcpy(s->obj_vel, r->obj_vel, sizeof(s->obj_vel));
+  memcpy(s->ee_pos, r->ee_pos, sizeof(s->ee_pos));
+  memcpy(s->ee_vel, r->ee_vel, sizeof(s->ee_vel));
+}
+
+void nds_replay_start_put(nd_rollout *r, const nds_state *s) {
+  memcpy(r->obj_pos, s->obj_pos, sizeof(s->obj_pos));
+  memcpy(r->obj_quat, s->obj_quat, sizeof(s->obj_quat));
+  memcpy(r->obj_vel, s->obj_vel, sizeof(s->obj_vel));
+  memcpy(r->ee_pos, s->ee_pos, sizeof(s->ee_pos));
+  memcpy(r->ee_vel, s->ee_vel, sizeof(s->ee_vel));
+}
+
+static void diverge(nds_replay_terms *out) {
+  out->pos_o = out->pos_ee = out->rot_o = NDS_REPLAY_DIVERGED;
+  out->diverged = 1;
+}
+
+/* The replay; stops once sp + k1 se + k2 sr > bound T (never for bound = INFINITY). */
+static int replay(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl, const nd_rollout *r,
+                  double k1, double k2, double bound, nds_replay_terms *out, double *pred,
+                  char *err, int errlen) {
+  memset(out, 0, sizeof(*out)); /* padding too, so terms compare bytewise */
+  int k = nds_replay_ratio(nm, r, err, errlen);
+  if (k < 0) return -1;
+  const mjModel *m = nm->m;
+  const int T = r->n / k; /* a trailing partial model step is not replayed */
+  const int dof0 = nm->ee_dof[0], dof1 = nm->ee_dof[1];
+  out->steps = T;
+
+  nds_state s0;
+  nds_replay_start_get(r, &s0);
+  char serr[64];
+  int j = 0, diverged = nds_state_set(nm, d, &s0, serr, sizeof(serr)) != 0;
+  for (int w = 0; w < mjNWARNING; w++) d->warning[w].number = WARN_START;
+
+  double sp = 0, se = 0, sr = 0;
+  const double limit = bound * T;
+  int cut = 0;
+  for (; j < T && !diverged && !cut; j++) {
+    const int base = j * k;
+    /* The mean of the k recorded controls: for k = 1 exactly the recorded one. */
+    double u[2] = {0, 0};
+    for (int i = 0; i < k; i++) {
+      u[0] += r->u[2 * (base + i)];
+      u[1] += r->u[2 * (base + i) + 1];
+    }
+    u[0] /= k;
+    u[1] /= k;
+    if (r->control == ND_CTRL_FORCE) {
+      d->qfrc_applied[dof0] = u[0];
+      d->qfrc_applied[dof1] = u[1];
+    } else {
+      const double vel[2] = {d->qvel[dof0], d->qvel[dof1]};
+      double f[2];
+      nds_ctrl_vel(ctrl, u, vel, f);
+      d->qfrc_applied[dof0] = f[0];
+      d->qfrc_applied[dof1] = f[1];
+    }
+    mj_step(m, d);
+    for (int w = 0; w < mjNWARNING; w++)
+      if (d->warning[w].number != WARN_START) diverged = 1;
+    if (diverged) break;
+
+    double obj[3], ee[2];
+    nds_replay_observe(nm, d, obj, ee);
+    const double *oo = r->obj + 3 * (base + k - 1), *oe = r->ee + 2 * (base + k - 1);
+    double dx = obj[0] - oo[0], dy = obj[1] - oo[1];
+    double ex = ee[0] - oe[0], ey = ee[1] - oe[1];
+    sp += dx * dx + dy * dy;
+    se += ex * ex + ey * ey;
+    /* The angle between the unit vectors v(phi) and v(phi~), i.e. arccos(v^T v~) in
+     * [0, pi], taken as the wrapped difference: arccos near 1 loses half the digits
+     * (its floor is ~1e-8 rad where the angles agree exactly). */
+    sr += fabs(nd_wrap_angle(obj[2] - oo[2]));
+    /* The sums only grow: past the limit the full L is past the bound too. */
+    if (sp + k1 * se + k2 * sr > limit) cut = 1;
+    if (pred) {
+      double *row = pred + (size_t)NDS_REPLAY_PRED_COLS * j;
+      row[0] = obj[0], row[1] = obj[1], row[2] = obj[2], row[3] = ee[0], row[4] = ee[1];
+    }
+  }
+  if (!diverged && !(isfinite(sp) && isfinite(se) && isfinite(sr))) diverged = 1;
+  if (diverged) {
+    if (pred)
+      for (size_t i = (size_t)NDS_REPLAY_PRED_COLS * j; i < (size_t)NDS_REPLAY_PRED_COLS * T;
+           i++)
+        pred[i] = NAN;
+    diverge(out);
+    return 0;
+  }
+  out->pos_o = sp / T;
+  out->pos_ee = se / T;
+  out->rot_o = sr / T;
+  out->cut = cut && j < T;
+  return 0;
+}
+
+int nds_replay(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl, const nd_rollout *r,
+               nds_replay_terms *out, double *pred, char *err, int errlen) {
+  return replay(nm, d, ctrl, r, 0, 0, INFINITY, out, pred, err, errlen);
+}
+
+int nds_replay_bounded(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
+                       const nd_rollout *r, double k1, double k2, double bound,
+                       nds_replay_terms *out, char *err, int errlen) {
+  return replay(nm, d, ctrl, r, k1, k2, bound, out, NULL, err, errlen);
+}
+
+double nds_replay_loss(const nds_replay_terms *t, double k1, double k2) {
+  return t->pos_o + k1 * t->pos_ee + k2 * t->rot_o;
+}
