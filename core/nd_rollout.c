@@ -32,14 +32,15 @@ static const double *nd_rollout_meta_ptr(const nd_rollout *r, int k) {
 }
 
 int nd_rollout_alloc(nd_rollout *r, int n) {
-  r->u = r->obj = r->ee = NULL;
+  r->u = r->obj = r->ee = r->sp = NULL;
   r->n = 0;
   if (n < 0 || n > ND_ROLLOUT_MAX_STEPS) return -1;
   if (n == 0) return 0;
   r->u = calloc((size_t)n * 2, sizeof(double));
   r->obj = calloc((size_t)n * 3, sizeof(double));
   r->ee = calloc((size_t)n * 2, sizeof(double));
-  if (!r->u || !r->obj || !r->ee) {
+  r->sp = calloc((size_t)n * 6, sizeof(double));
+  if (!r->u || !r->obj || !r->ee || !r->sp) {
     nd_rollout_free(r);
     return -1;
   }
@@ -51,7 +52,8 @@ void nd_rollout_free(nd_rollout *r) {
   free(r->u);
   free(r->obj);
   free(r->ee);
-  r->u = r->obj = r->ee = NULL;
+  free(r->sp);
+  r->u = r->obj = r->ee = r->sp = NULL;
   r->n = 0;
 }
 
@@ -104,14 +106,15 @@ int nd_rollout_check(const nd_rollout *r, char *err, int errlen) {
         return -1;
       }
   }
-  if (!r->u || !r->obj || !r->ee) {
+  if (!r->u || !r->obj || !r->ee || !r->sp) {
     snprintf(err, (size_t)errlen, "rollout: n = %d but the step arrays are not allocated",
              (int)r->n);
     return -1;
   }
   if (nd_rollout_check_array(r->u, r->n, 2, "u", err, errlen) ||
       nd_rollout_check_array(r->obj, r->n, 3, "obj", err, errlen) ||
-      nd_rollout_check_array(r->ee, r->n, 2, "ee", err, errlen))
+      nd_rollout_check_array(r->ee, r->n, 2, "ee", err, errlen) ||
+      nd_rollout_check_array(r->sp, r->n, 6, "sp", err, errlen))
     return -1;
   return 0;
 }
@@ -176,13 +179,14 @@ int nd_rollout_encode(const nd_rollout *r, unsigned char *buf, size_t cap, size_
   p = nd_put_f64(p, r->u, (size_t)r->n * 2);
   p = nd_put_f64(p, r->obj, (size_t)r->n * 3);
   p = nd_put_f64(p, r->ee, (size_t)r->n * 2);
+  p = nd_put_f64(p, r->sp, (size_t)r->n * 6);
   *len = (size_t)(p - buf);
   return 0;
 }
 
 int nd_rollout_decode(nd_rollout *r, const unsigned char *buf, size_t len, char *err,
                       int errlen) {
-  r->u = r->obj = r->ee = NULL;
+  r->u = r->obj = r->ee = r->sp = NULL;
   r->n = 0;
   if (len < ND_ROLLOUT_ENC_FIXED) {
     snprintf(err, (size_t)errlen, "rollout: %zu bytes, shorter than the %d-byte fixed part",
@@ -222,7 +226,8 @@ int nd_rollout_decode(nd_rollout *r, const unsigned char *buf, size_t len, char 
   }
   p = nd_get_f64(p, r->u, (size_t)n * 2);
   p = nd_get_f64(p, r->obj, (size_t)n * 3);
-  nd_get_f64(p, r->ee, (size_t)n * 2);
+  p = nd_get_f64(p, r->ee, (size_t)n * 2);
+  nd_get_f64(p, r->sp, (size_t)n * 6);
   if (nd_rollout_check(r, err, errlen)) {
     nd_rollout_free(r);
     return -1;

@@ -2,10 +2,16 @@
  *
  * What the adapter needs to replay a task in the model: the initial state, the control
  * actually applied at every control step (the force on the sphere in simulation, the
- * end-effector velocity on a real robot), and what was observed after each step. Plain
- * arrays, owned by the struct (nd_rollout_alloc / nd_rollout_free).
+ * end-effector velocity on a real robot), the setpoint the executor commanded during the
+ * step, and what was observed after each step. Plain arrays, owned by the struct
+ * (nd_rollout_alloc / nd_rollout_free).
  *
- * Encoding (the payload of a replay-buffer record, see nd_rfile.h), version 1, every
+ * The setpoints are kept because replaying forces open-loop lets the sphere run away as
+ * soon as a candidate theta makes contact differ from the recording, which makes the
+ * replay loss rough in theta; replaying the setpoints through the robot's tracking
+ * controller keeps the sphere on its path and the loss smooth (sim/nds_replay.h).
+ *
+ * Encoding (the payload of a replay-buffer record, see nd_rfile.h), version 2, every
  * field little-endian, doubles as IEEE-754 binary64 bit patterns (bitwise round trip):
  *
  *   offset  size  field
@@ -26,7 +32,8 @@
  *      232  16 n  f64 u[n][2]
  *              24 n  f64 obj[n][3]
  *              16 n  f64 ee[n][2]
- *   total 232 + 56 n bytes, exactly.
+ *              48 n  f64 sp[n][6]
+ *   total 232 + 104 n bytes, exactly.
  *
  * A rollout is valid when n is in [1, ND_ROLLOUT_MAX_STEPS] (the adapter divides by the
  * duration), outcome and control are known values, dt > 0, and every double is finite.
@@ -48,9 +55,9 @@ enum { ND_OUTCOME_SUCCESS = 1, ND_OUTCOME_TIMEOUT = 2, ND_OUTCOME_ABORTED = 3 };
 
 #define ND_ROLLOUT_MAX_STEPS 600000   /* 10 min at 1 kHz: a sanity bound for decoding */
 
-#define ND_ROLLOUT_ENC_VERSION 1
+#define ND_ROLLOUT_ENC_VERSION 2
 #define ND_ROLLOUT_ENC_FIXED 232      /* bytes before the step arrays */
-#define ND_ROLLOUT_ENC_STEP 56        /* bytes per step */
+#define ND_ROLLOUT_ENC_STEP 104       /* bytes per step */
 
 typedef struct {
   /* metadata */
@@ -69,6 +76,7 @@ typedef struct {
   double *u;              /* n x 2 */
   double *obj;            /* n x 3: object x, y, yaw */
   double *ee;             /* n x 2: end-effector x, y */
+  double *sp;             /* n x 6: commanded setpoint px, py, vx, vy, ax, ay */
 } nd_rollout;
 
 /* Allocate zeroed step arrays of r for n in [0, ND_ROLLOUT_MAX_STEPS] steps and set r->n

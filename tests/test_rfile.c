@@ -65,8 +65,10 @@ static void make_rollout(nd_rollout *r, int n, uint64_t seed) {
   for (int i = 0; i < 2 * n; i++) r->u[i] = rnd_unit(&s) * 20;
   for (int i = 0; i < 3 * n; i++) r->obj[i] = rnd_unit(&s);
   for (int i = 0; i < 2 * n; i++) r->ee[i] = rnd_unit(&s);
+  for (int i = 0; i < 6 * n; i++) r->sp[i] = rnd_unit(&s);
   r->u[0] = -0.0;
   r->ee[1] = 4.9e-324;
+  r->sp[6 * n - 1] = -0.0;
 }
 
 static int same_bits(const void *a, const void *b, size_t n) { return memcmp(a, b, n) == 0; }
@@ -88,6 +90,7 @@ static void assert_rollout_equal(const nd_rollout *a, const nd_rollout *b) {
   assert_true(same_bits(a->u, b->u, (size_t)a->n * 2 * 8));
   assert_true(same_bits(a->obj, b->obj, (size_t)a->n * 3 * 8));
   assert_true(same_bits(a->ee, b->ee, (size_t)a->n * 2 * 8));
+  assert_true(same_bits(a->sp, b->sp, (size_t)a->n * 6 * 8));
 }
 
 /* Generic payload of record seq: its seq, its length, then bytes derived from both. */
@@ -210,7 +213,7 @@ static void test_encoding_round_trip_and_layout(void **state) {
   nd_rollout r, d;
   make_rollout(&r, 37, 5);
   const size_t size = nd_rollout_encoded_size(37);
-  assert_int_equal(size, 232 + 56 * 37);
+  assert_int_equal(size, 232 + 104 * 37);
   unsigned char *buf = malloc(size);
   size_t len = 0;
   assert_int_equal(nd_rollout_encode(&r, buf, size - 1, &len, err, sizeof err), -1);
@@ -218,7 +221,7 @@ static void test_encoding_round_trip_and_layout(void **state) {
   assert_int_equal(nd_rollout_encode(&r, buf, size, &len, err, sizeof err), 0);
   assert_int_equal(len, size);
   /* Little-endian at the documented offsets, whatever the host. */
-  const unsigned char head[8] = {1, 0, 0, 0, 37, 0, 0, 0};
+  const unsigned char head[8] = {2, 0, 0, 0, 37, 0, 0, 0};
   assert_memory_equal(buf, head, 8);
   unsigned char want[8];
   put_f64(want, r.dt);
@@ -228,6 +231,10 @@ static void test_encoding_round_trip_and_layout(void **state) {
   put_f64(want, r.u[1]);
   assert_memory_equal(buf + 240, want, 8);
   put_f64(want, r.ee[2 * 37 - 1]);
+  assert_memory_equal(buf + 232 + 56 * 37 - 8, want, 8);
+  put_f64(want, r.sp[0]);
+  assert_memory_equal(buf + 232 + 56 * 37, want, 8);
+  put_f64(want, r.sp[6 * 37 - 1]);
   assert_memory_equal(buf + size - 8, want, 8);
   assert_int_equal(nd_rollout_decode(&d, buf, len, err, sizeof err), 0);
   assert_rollout_equal(&r, &d);
@@ -269,10 +276,10 @@ static void test_decode_rejects(void **state) {
   char err[256];
   nd_rollout r;
   make_rollout(&r, STEPS, 9);
-  unsigned char good[232 + 56 * STEPS];
+  unsigned char good[232 + 104 * STEPS];
   size_t len;
   assert_int_equal(nd_rollout_encode(&r, good, sizeof good, &len, err, sizeof err), 0);
-  const int u0 = 232, obj0 = 232 + 16 * STEPS, ee0 = 232 + 40 * STEPS;
+  const int u0 = 232, obj0 = 232 + 16 * STEPS, ee0 = 232 + 40 * STEPS, sp0 = 232 + 56 * STEPS;
   /* not finite, named by field and index */
   expect_reject(good, len, 0, p_nan_at, 32, "dt");
   expect_reject(good, len, 0, p_nan_at, 48, "goal[1]");
@@ -283,6 +290,7 @@ static void test_decode_rejects(void **state) {
   expect_reject(good, len, 0, p_nan_at, u0 + (2 * 4 + 1) * 8, "u[4][1]");
   expect_reject(good, len, 0, p_inf_at, obj0 + (3 * (STEPS - 1) + 2) * 8, "obj[8][2]");
   expect_reject(good, len, 0, p_nan_at, ee0, "ee[0][0]");
+  expect_reject(good, len, 0, p_inf_at, sp0 + (6 * 3 + 4) * 8, "sp[3][4]");
   /* dt must be a positive step */
   expect_reject(good, len, 0, p_f64_zero, 32, "dt");
   expect_reject(good, len, 0, p_f64_neg, 32, "dt");
@@ -300,7 +308,8 @@ static void test_decode_rejects(void **state) {
   expect_reject(good, len, 0, p_u32, 24 << 24 | 7, "outcome = 7");
   expect_reject(good, len, 0, p_u32, 24 << 24 | 0, "outcome = 0");
   expect_reject(good, len, 0, p_u32, 28 << 24 | 2, "control = 2");
-  expect_reject(good, len, 0, p_u32, 0 << 24 | 2, "version 2");
+  expect_reject(good, len, 0, p_u32, 0 << 24 | 1, "version 1");
+  expect_reject(good, len, 0, p_u32, 0 << 24 | 3, "version 3");
   /* the encoder refuses what the decoder would */
   r.u[5] = NAN;
   assert_int_equal(nd_rollout_encode(&r, good, sizeof good, &len, err, sizeof err), -1);
@@ -381,7 +390,7 @@ static void test_undecodable_record(void **state) {
   unlink(path);
   nd_rollout r;
   make_rollout(&r, 4, 3);
-  unsigned char b[232 + 56 * 4];
+  unsigned char b[232 + 104 * 4];
   size_t len;
   assert_int_equal(nd_rollout_encode(&r, b, sizeof b, &len, err, sizeof err), 0);
   nd_rfile_writer w;
