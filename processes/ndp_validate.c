@@ -2,6 +2,7 @@
 #include "ndp_validate.h"
 
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 
 /* 0 if all n values are finite and |x| <= lim, else -1 with "<what>[i] = v". */
@@ -115,6 +116,73 @@ int ndp_check_params(const nudge_params_t *m, char *why, int len) {
   if (m->version < 0 || m->buffer_size < 0) {
     snprintf(why, len, "version %lld / buffer_size %d must not be negative",
              (long long)m->version, m->buffer_size);
+    return -1;
+  }
+  return 0;
+}
+
+/* Longest string accepted, NUL included: far beyond what the contracts allow (reason <
+ * 256, names < 64 bytes), so only nonsense is refused. */
+#define NDP_MAX_STRING 4096
+
+/* Step *pos over a string field of an encoding of len bytes: its int32 length word
+ * (big-endian, NUL included) must be in [1, NDP_MAX_STRING], the bytes must be in the
+ * buffer and end with NUL. 0, or -1 with a reason. */
+static int skip_string(const unsigned char *b, int len, int *pos, const char *what, char *why,
+                       int wlen) {
+  if (*pos + 4 > len) {
+    snprintf(why, wlen, "message ends before %s (%d bytes)", what, len);
+    return -1;
+  }
+  const uint32_t u = (uint32_t)b[*pos] << 24 | (uint32_t)b[*pos + 1] << 16 |
+                     (uint32_t)b[*pos + 2] << 8 | (uint32_t)b[*pos + 3];
+  const int32_t n = (int32_t)u;
+  if (n < 1 || n > NDP_MAX_STRING || n > len - *pos - 4) {
+    snprintf(why, wlen, "%s has length %d in a message of %d bytes", what, (int)n, len);
+    return -1;
+  }
+  if (b[*pos + 4 + n - 1] != 0) {
+    snprintf(why, wlen, "%s is not NUL-terminated", what);
+    return -1;
+  }
+  *pos += 4 + n;
+  return 0;
+}
+
+/* Enough bytes left for the fixed-size fields after the last string? */
+static int tail_ok(int pos, int need, int len, char *why, int wlen) {
+  if (pos + need > len) {
+    snprintf(why, wlen, "message of %d bytes is truncated", len);
+    return -1;
+  }
+  return 0;
+}
+
+int ndp_decode_episode(const void *buf, int len, nudge_episode_t *m, char *why, int wlen) {
+  /* fingerprint, utime, task_id, event | reason | time, task_error */
+  int pos = 8 + 8 + 8 + 1;
+  if (len < 0 || skip_string(buf, len, &pos, "reason", why, wlen) ||
+      tail_ok(pos, 8 + 8, len, why, wlen))
+    return -1;
+  /* Every length now holds, so only the fingerprint can fail, and it is checked before
+   * anything is allocated. */
+  if (nudge_episode_t_decode(buf, 0, len, m) < 0) {
+    snprintf(why, wlen, "not a nudge_episode_t (fingerprint)");
+    return -1;
+  }
+  return 0;
+}
+
+int ndp_decode_status(const void *buf, int len, nudge_status_t *m, char *why, int wlen) {
+  /* fingerprint, utime | name | pid | state | 3 int64, 3 int32, int64, double */
+  int pos = 8 + 8;
+  if (len < 0 || skip_string(buf, len, &pos, "name", why, wlen)) return -1;
+  pos += 4;
+  if (skip_string(buf, len, &pos, "state", why, wlen) ||
+      tail_ok(pos, 3 * 8 + 3 * 4 + 8 + 8, len, why, wlen))
+    return -1;
+  if (nudge_status_t_decode(buf, 0, len, m) < 0) {
+    snprintf(why, wlen, "not a nudge_status_t (fingerprint)");
     return -1;
   }
   return 0;

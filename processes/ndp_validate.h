@@ -11,6 +11,7 @@
 #include "nudge/nudge_params_t.h"
 #include "nudge/nudge_plan_t.h"
 #include "nudge/nudge_robot_state_t.h"
+#include "nudge/nudge_status_t.h"
 #include "nudge/nudge_task_t.h"
 
 /* Bounds shared by the checks: the workspace is a few metres at most, nothing a pushing
@@ -26,5 +27,15 @@ int ndp_check_ee_cmd(const nudge_ee_cmd_t *m, char *why, int len);
 int ndp_check_plan(const nudge_plan_t *m, char *why, int len);
 int ndp_check_task(const nudge_task_t *m, char *why, int len);
 int ndp_check_params(const nudge_params_t *m, char *why, int len);
+
+/* Decode EPISODE / STATUS bytes (the types with strings) without trusting them: the
+ * decoders lcm-gen 1.3.1 generates take a string's length word as given, so a negative
+ * one makes them memcpy to NULL (the process dies), zero leaves the string without its
+ * NUL, and one beyond the message leaks what they allocated. These check every string
+ * field against the buffer first. Return 0 with *m decoded (free with
+ * nudge_X_t_decode_cleanup), or -1 with a reason and nothing to free. Subscribe with
+ * lcm_subscribe and call these instead of nudge_X_t_subscribe. */
+int ndp_decode_episode(const void *buf, int len, nudge_episode_t *m, char *why, int wlen);
+int ndp_decode_status(const void *buf, int len, nudge_status_t *m, char *why, int wlen);
 
 #endif

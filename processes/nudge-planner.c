@@ -413,24 +413,32 @@ static int check_episode(const nudge_episode_t *m, char *why, int len) {
   return 0;
 }
 
-static void on_episode(const lcm_recv_buf_t *rb, const char *ch, const nudge_episode_t *m,
-                       void *user) {
-  (void)rb;
+/* Raw subscription: lcm-gen's stub would decode a lying string length and crash
+ * (ndp_decode_episode); an undecodable message counts as rejected like a bad one. */
+static void on_episode(const lcm_recv_buf_t *rb, const char *ch, void *user) {
   proc *p = user;
   char why[160];
+  nudge_episode_t m;
   p->st.received++;
-  if (check_episode(m, why, sizeof(why))) {
+  if (ndp_decode_episode(rb->data, (int)rb->data_size, &m, why, sizeof(why))) {
     reject(p, ch, why);
     return;
   }
-  if (m->event == NUDGE_EPISODE_T_EVENT_START) return;
+  const int bad = check_episode(&m, why, sizeof(why));
+  if (bad) reject(p, ch, why);
+  if (bad || m.event == NUDGE_EPISODE_T_EVENT_START) {
+    nudge_episode_t_decode_cleanup(&m);
+    return;
+  }
   p->have_ended = 1;
-  p->ended_id = m->task_id;
-  if (!p->active || m->task_id != p->task.task_id) return;
-  p->active = 0;
-  task_summary(p, m->event == NUDGE_EPISODE_T_EVENT_SUCCESS   ? "succeeded"
-                  : m->event == NUDGE_EPISODE_T_EVENT_TIMEOUT ? "timed out"
-                                                              : "was rejected");
+  p->ended_id = m.task_id;
+  if (p->active && m.task_id == p->task.task_id) {
+    p->active = 0;
+    task_summary(p, m.event == NUDGE_EPISODE_T_EVENT_SUCCESS   ? "succeeded"
+                    : m.event == NUDGE_EPISODE_T_EVENT_TIMEOUT ? "timed out"
+                                                                : "was rejected");
+  }
+  nudge_episode_t_decode_cleanup(&m);
 }
 
 static void on_params(const lcm_recv_buf_t *rb, const char *ch, const nudge_params_t *m,
@@ -546,7 +554,7 @@ int main(int argc, char **argv) {
   nudge_ee_cmd_t_subscription_t *s_cmd = NULL;
   nudge_task_t_subscription_t *s_task = NULL;
   nudge_params_t_subscription_t *s_par = NULL;
-  nudge_episode_t_subscription_t *s_epi = NULL;
+  lcm_subscription_t *s_epi = NULL;
   proc p;
   memset(&p, 0, sizeof(p));
   p.o = &o;
@@ -580,7 +588,7 @@ int main(int argc, char **argv) {
   s_cmd = nudge_ee_cmd_t_subscribe(p.lcm, NDP_CH_EE_CMD, on_ee_cmd, &p);
   s_task = nudge_task_t_subscribe(p.lcm, NDP_CH_TASK, on_task, &p);
   s_par = nudge_params_t_subscribe(p.lcm, NDP_CH_PARAMS, on_params, &p);
-  s_epi = nudge_episode_t_subscribe(p.lcm, NDP_CH_EPISODE, on_episode, &p);
+  s_epi = lcm_subscribe(p.lcm, NDP_CH_EPISODE, on_episode, &p);
   if (!s_mocap || !s_rs || !s_cmd || !s_task || !s_par || !s_epi ||
       nudge_mocap_t_subscription_set_queue_capacity(s_mocap, p.in_mocap.cap) ||
       nudge_robot_state_t_subscription_set_queue_capacity(s_rs, p.in_rs.cap) ||
@@ -645,7 +653,7 @@ done:
     if (s_cmd) nudge_ee_cmd_t_unsubscribe(p.lcm, s_cmd);
     if (s_task) nudge_task_t_unsubscribe(p.lcm, s_task);
     if (s_par) nudge_params_t_unsubscribe(p.lcm, s_par);
-    if (s_epi) nudge_episode_t_unsubscribe(p.lcm, s_epi);
+    if (s_epi) lcm_unsubscribe(p.lcm, s_epi);
     lcm_destroy(p.lcm);
   }
   nds_planner_free(p.planner);

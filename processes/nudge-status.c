@@ -7,7 +7,7 @@
 
 #include "nd_parse.h"
 #include "ndp.h"
-#include "nudge/nudge_status_t.h"
+#include "ndp_validate.h"
 
 #define PROG "nudge-status"
 #define MAX_TEXT 64 /* status_t: name and state are short */
@@ -40,11 +40,7 @@ static int status_ok(const nudge_status_t *m) {
   return 1;
 }
 
-static void on_status(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_status_t *m,
-                      void *user) {
-  (void)rbuf;
-  (void)ch;
-  status_io *io = user;
+static void show_status(status_io *io, const nudge_status_t *m) {
   if (!status_ok(m)) {
     if (io->refused++ < 3) fprintf(stderr, PROG ": ignored a malformed heartbeat\n");
     return;
@@ -62,6 +58,21 @@ static void on_status(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_st
   printf("  up %.1f s\n", m->uptime);
   fflush(stdout);
   io->printed++;
+}
+
+/* Raw subscription: lcm-gen's stub would decode a lying string length and crash
+ * (ndp_decode_status). */
+static void on_status(const lcm_recv_buf_t *rbuf, const char *ch, void *user) {
+  (void)ch;
+  status_io *io = user;
+  nudge_status_t msg;
+  char why[160];
+  if (ndp_decode_status(rbuf->data, (int)rbuf->data_size, &msg, why, sizeof(why))) {
+    if (io->refused++ < 3) fprintf(stderr, PROG ": ignored a malformed heartbeat: %s\n", why);
+    return;
+  }
+  show_status(io, &msg);
+  nudge_status_t_decode_cleanup(&msg);
 }
 
 static void usage(FILE *f) {
@@ -132,7 +143,7 @@ int main(int argc, char **argv) {
     return 1;
   }
   status_io io = {&c, 0, 0, 0};
-  nudge_status_t_subscription_t *sub = nudge_status_t_subscribe(lcm, NDP_CH_STATUS, on_status, &io);
+  lcm_subscription_t *sub = lcm_subscribe(lcm, NDP_CH_STATUS, on_status, &io);
   const double t_end = c.timeout >= 0.0 ? ndp_mono() + c.timeout : 0.0;
   int status = 0;
   while (!ndp_quit && !io.matched && !(c.count && io.printed >= c.count)) {
@@ -160,7 +171,7 @@ int main(int argc, char **argv) {
       status = 1;
     }
   }
-  nudge_status_t_unsubscribe(lcm, sub);
+  lcm_unsubscribe(lcm, sub);
   lcm_destroy(lcm);
   return status;
 }

@@ -1,0 +1,251 @@
+# process-lib.sh: what the process tests share (sourced by tests/test_*.sh).
+#
+# A test script runs inside tests/netns-run (private namespaces, LCM_DEFAULT_URL set),
+# takes the build directory as $1, and calls pt_init first. Everything it starts goes
+# through pt_spawn, so the EXIT trap can stop it; every wait has a deadline, so a test
+# ends by itself. Assertions print "ok - ..." or "FAIL - ..." and the test exits 1 if any
+# failed; figures are printed as 'name value unit' lines.
+
+PT_NAME=${PT_NAME:-process-test}
+PT_FAILS=0
+PT_PIDS=()          # everything started, for the EXIT trap
+PT_LOGGER=""
+
+pt_say() { printf '%s: %s\n' "$PT_NAME" "$*"; }
+
+pt_ok() { printf 'ok - %s\n' "$*"; }
+
+pt_fail() {
+  printf 'FAIL - %s\n' "$*"
+  PT_FAILS=$((PT_FAILS + 1))
+}
+
+# pt_check DESCRIPTION COMMAND...: ok if COMMAND succeeds.
+pt_check() {
+  local what=$1
+  shift
+  if "$@"; then pt_ok "$what"; else pt_fail "$what"; fi
+}
+
+# A figure line, also kept in $PT_WORK/figures.
+pt_figure() { printf '%s %s %s\n' "$1" "$2" "$3" | tee -a "$PT_WORK/figures"; }
+
+pt_now_us() { local t=$EPOCHREALTIME; printf '%s' "${t/[.,]/}"; }
+
+# pt_init BUILD_DIR: locate the programs, make the work directory, arm the EXIT trap.
+pt_init() {
+  PT_BUILD=${1:?usage: $0 BUILD_DIR}
+  PT_BIN=$PT_BUILD/bin
+  PT_LC=$PT_BUILD/tests/nudge-logcheck
+  PT_INJ=$PT_BUILD/tests/nudge-inject
+  local p
+  for p in "$PT_BIN"/nudge-{up,bridge,executor,planner,tasks,status} "$PT_LC" "$PT_INJ"; do
+    [[ -x $p ]] || { echo "$PT_NAME: $p is missing: build first" >&2; exit 1; }
+  done
+  command -v lcm-logger >/dev/null || { echo "$PT_NAME: SKIP: lcm-logger is not installed (liblcm-bin)" >&2; exit 77; }
+  # The checks and the clean-up take every process in sight for the test's own.
+  if [[ ${NETNS_RUN_INSIDE:-} != 1 || $(tr '\0' ' ' </proc/1/cmdline) != *netns-run* ]]; then
+    echo "$PT_NAME: run me under tests/netns-run (private namespaces)" >&2
+    exit 1
+  fi
+  PT_WORK=$(mktemp -d "${TMPDIR:-/tmp}/nudge-$PT_NAME.XXXXXX") || exit 1
+  trap pt_cleanup EXIT
+  trap 'exit 130' INT
+  trap 'exit 143' TERM
+  pt_say "work dir $PT_WORK, LCM $LCM_DEFAULT_URL"
+}
+
+# pt_spawn VAR CMD...: start CMD in the background, its pid into VAR and PT_PIDS. With
+# SIGINT at its default: a script's background commands would otherwise ignore it.
+pt_spawn() {
+  local -n out=$1
+  shift
+  env --default-signal=INT "$@" &
+  out=$!
+  PT_PIDS+=("$out")
+}
+
+# pt_wait_pid PID SECONDS: wait for PID to exit; its status in PT_RC. 1 on timeout.
+pt_wait_pid() {
+  local pid=$1 end=$((SECONDS + $2))
+  while kill -0 "$pid" 2>/dev/null; do
+    ((SECONDS >= end)) && return 1
+    sleep 0.1
+  done
+  wait "$pid"
+  PT_RC=$?
+  return 0
+}
+
+# pt_wait_for SECONDS COMMAND...: poll COMMAND every 0.2 s until it succeeds.
+pt_wait_for() {
+  local end=$((SECONDS + $1))
+  shift
+  until "$@" >/dev/null 2>&1; do
+    ((SECONDS >= end)) && return 1
+    sleep 0.2
+  done
+}
+
+# pt_logger FILE: record the channels the checks read (not the 1 kHz ROBOT_STATE nor
+# MOCAP: less load, fewer drops) until pt_stop_logger.
+pt_logger() {
+  pt_spawn PT_LOGGER lcm-logger -q -f -c '^(EE_CMD|PLAN|TASK|PARAMS|EPISODE|STATUS)$' "$1"
+  # lcm-logger creates the file once it has subscribed.
+  pt_wait_for 5 test -e "$1" || pt_fail "lcm-logger did not start"
+  sleep 0.2
+}
+
+pt_stop_logger() {
+  [[ -n $PT_LOGGER ]] || return 0
+  kill -INT "$PT_LOGGER" 2>/dev/null
+  pt_wait_pid "$PT_LOGGER" 5 || { kill -KILL "$PT_LOGGER"; wait "$PT_LOGGER"; }
+  PT_LOGGER=""
+}
+
+# pt_up_wait LOGDIR SECONDS PID: wait until the supervisor PID says all processes are up;
+# 1 at the deadline or as soon as it has exited (it gives up when one cannot start).
+pt_up_wait() {
+  local end=$((SECONDS + $2))
+  until grep -q 'all up' "$1/supervisor.log" 2>/dev/null; do
+    if ((SECONDS >= end)) || ! kill -0 "$3" 2>/dev/null; then return 1; fi
+    sleep 0.2
+  done
+}
+
+# pt_up_stop PID SECONDS: SIGINT to a supervisor, wait; its status in PT_RC.
+pt_up_stop() {
+  kill -INT "$1" 2>/dev/null
+  if ! pt_wait_pid "$1" "$2"; then
+    pt_fail "nudge-up (pid $1) did not stop within $2 s of SIGINT"
+    kill -KILL "$1" 2>/dev/null
+    wait "$1"
+    PT_RC=137
+  fi
+}
+
+# pt_restarts_are LOGDIR [NAME N]...: the supervisor's final "restarts:" summary has N
+# for each NAME given and 0 for every other process, and only the named processes exited
+# on their own ("nudge-X exited" lines).
+pt_restarts_are() {
+  local dir=$1 line p n want bad="" exits
+  shift
+  local -A expect=()
+  while (($# >= 2)); do expect[$1]=$2; shift 2; done
+  line=$(grep -o 'all stopped; restarts:.*' "$dir/supervisor.log" | tail -n 1)
+  if [[ -z $line ]]; then
+    pt_fail "supervisor: no 'all stopped' summary in $dir/supervisor.log"
+    return
+  fi
+  line=${line#all stopped; restarts:}
+  while read -r p n; do
+    [[ -n $p ]] || continue
+    want=${expect[$p]:-0}
+    [[ $n == "$want" ]] || bad+=" $p $n (expected $want)"
+  done < <(tr ',' '\n' <<<"$line")
+  exits=$(grep -oE 'nudge-[a-z]+ exited' "$dir/supervisor.log" | sort -u | sed 's/nudge-//; s/ exited//')
+  for p in $exits; do
+    [[ -n ${expect[$p]:-} ]] || bad+=" $p exited"
+  done
+  if [[ -z $bad ]]; then
+    pt_ok "supervisor: restarts:$line"
+  else
+    pt_fail "supervisor: restarts:$line; wrong:$bad"
+    grep -E 'exited|restarted' "$dir/supervisor.log"
+  fi
+}
+
+# Pids the supervisor logged in LOGDIR (started and restarted), one per line.
+pt_logged_pids() {
+  sed -n -E 's/.*nudge-[a-z]+ up \(pid ([0-9]+)\).*/\1/p; s/.*restarted nudge-[a-z]+ \(pid ([0-9]+)\).*/\1/p' \
+    "$1/supervisor.log"
+}
+
+# pt_none_left LOGDIR: assert no process the supervisor logged is alive, and nothing but
+# this script runs in the namespace.
+pt_none_left() {
+  local dir=$1 p alive=() n=0
+  for p in $(pt_logged_pids "$dir"); do
+    n=$((n + 1))
+    [[ -d /proc/$p ]] && [[ $(cut -d' ' -f3 "/proc/$p/stat" 2>/dev/null) != Z ]] && alive+=("$p")
+  done
+  if ((${#alive[@]} == 0)); then
+    pt_ok "none of the $n processes the supervisor logged is alive"
+  else
+    pt_fail "processes of the run still alive: ${alive[*]}"
+    ps -o pid,ppid,stat,args -p "$(IFS=,; echo "${alive[*]}")" || true
+  fi
+  # The namespace holds netns-run (pid 1), this script and what the test started:
+  # anything else alive now was left behind. /proc is read without forking, so no child
+  # of this shell is in the list.
+  local d q st args left=()
+  for d in /proc/[0-9]*; do
+    q=${d#/proc/}
+    ((q == 1 || q == $$)) && continue
+    st=""
+    read -r st <"$d/stat" 2>/dev/null || continue
+    st=${st##*) }
+    [[ ${st%% *} == Z ]] && continue
+    args=()
+    mapfile -d '' -t args <"$d/cmdline" 2>/dev/null
+    left+=("$q:${args[*]:-?}")
+  done
+  if ((${#left[@]} == 0)); then
+    pt_ok "no other process is running in the namespace"
+  else
+    pt_fail "processes still running in the namespace: ${left[*]}"
+  fi
+}
+
+# pt_lc ARGS...: run nudge-logcheck, echo its figures, keep them in $PT_WORK/figures.
+# Returns its status.
+pt_lc() {
+  local out rc
+  out=$("$PT_LC" "$@")
+  rc=$?
+  [[ -n $out ]] && printf '%s\n' "$out" | tee -a "$PT_WORK/figures"
+  return $rc
+}
+
+# pt_val VAR LOGCHECK-ARGS... NAME: run nudge-logcheck quietly; VAR = the value of its
+# figure NAME ("" if absent).
+pt_val() {
+  local -n out=$1
+  local name=${!#}
+  local args=("${@:2:$#-2}")
+  out=$("$PT_LC" "${args[@]}" 2>/dev/null | awk -v n="$name" '$1 == n { print $2 }')
+}
+
+# Dump what helps to diagnose a failure: the tails of the process logs.
+pt_dump_logs() {
+  local f
+  for f in "$@"; do
+    [[ -f $f ]] || continue
+    echo "----- tail of $f"
+    tail -n 25 "$f" | grep -v 'error -1 decoding' | tail -n 15
+  done
+}
+
+pt_cleanup() {
+  local rc=$? p
+  trap - EXIT INT TERM
+  # Stop what is still running: SIGINT first (supervisors stop their children), then
+  # SIGKILL what did not go.
+  for p in "${PT_PIDS[@]}"; do kill -INT "$p" 2>/dev/null; done
+  for p in "${PT_PIDS[@]}"; do pt_wait_pid "$p" 8 || kill -KILL "$p" 2>/dev/null; done
+  for p in "${PT_PIDS[@]}"; do wait "$p" 2>/dev/null; done
+  # Children of a supervisor that had to be killed: everything in the namespace is ours.
+  local d q
+  for d in /proc/[0-9]*; do
+    q=${d#/proc/}
+    ((q == 1 || q == $$)) && continue
+    kill -KILL "$q" 2>/dev/null && pt_say "cleanup: killed leftover process $q"
+  done
+  if ((rc != 0 || PT_FAILS > 0)); then
+    pt_dump_logs "$PT_WORK"/*/*.log "$PT_WORK"/*.out "$PT_WORK"/*.err
+  fi
+  [[ -n ${PT_WORK:-} && -d $PT_WORK ]] && rm -rf -- "$PT_WORK"
+  if ((rc == 0 && PT_FAILS > 0)); then rc=1; fi
+  if ((rc == 0)); then pt_say "PASSED"; elif ((rc != 77)); then pt_say "FAILED ($PT_FAILS failed checks, status $rc)"; fi
+  exit $rc
+}

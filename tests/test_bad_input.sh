@@ -1,0 +1,133 @@
+#!/usr/bin/env bash
+# test_bad_input: malformed messages on every input channel are refused and counted, and
+# nothing dies.
+#
+#   netns-run bash test_bad_input.sh BUILD_DIR
+#
+# With `nudge-up run` up and a task runner pushing the default chain's first two goals,
+# nudge-inject sends on one channel at a time (MOCAP, ROBOT_STATE, EE_CMD, PLAN, TASK,
+# PARAMS, EPISODE, then STATUS with nudge-status listening): 'bad' messages that decode
+# but carry NaN, inf or out-of-range values, and garbage that does not decode. For each
+# channel, every process subscribed to it must count each bad message in its STATUS
+# `rejected` (heartbeat before vs first heartbeat after the burst). Afterwards: no process
+# died or was restarted (supervisor.log, pids), the task runner, running through the
+# injections, finished with at least one of its two goals reached (see test_system for why
+# one), and a further task gets plans and reaches
+# its goal (or at least keeps getting plans) with smooth setpoints.
+set -u
+PT_NAME=test_bad_input
+. "$(dirname "${BASH_SOURCE[0]}")/process-lib.sh"
+pt_init "$@"
+
+LOG=$PT_WORK/bad.lcmlog
+RUN=$PT_WORK/run
+
+# Who reads which channel (nudge-tasks without --record reads only MOCAP).
+declare -A READERS=(
+  [MOCAP]="nudge-planner nudge-tasks"
+  [ROBOT_STATE]="nudge-executor nudge-planner"
+  [EE_CMD]="nudge-bridge nudge-planner"
+  [PLAN]="nudge-executor"
+  [TASK]="nudge-planner"
+  [PARAMS]="nudge-planner"
+  [EPISODE]="nudge-planner"
+)
+CHANNELS=(MOCAP ROBOT_STATE EE_CMD PLAN TASK PARAMS EPISODE)
+
+pt_logger "$LOG"
+pt_spawn up "$PT_BIN/nudge-up" run --log-dir "$RUN" 2>"$PT_WORK/up.err"
+pt_up_wait "$RUN" 30 "$up" || { pt_fail "nudge-up run did not come up within 30 s (see supervisor.log below)"; exit 1; }
+pt_ok "nudge-up run: all processes up"
+pids_before=$(pt_logged_pids "$RUN" | sort | tr '\n' ' ')
+
+pt_spawn tasks "$PT_BIN/nudge-tasks" --goal 0.15,0,0 --goal 0.25,0.10,0.4 --tau 8 \
+  >"$PT_WORK/tasks.out" 2>"$PT_WORK/tasks.err"
+"$PT_BIN/nudge-status" --wait nudge-tasks --timeout 10 ||
+  pt_fail "no heartbeat from nudge-tasks within 10 s"
+
+# Heartbeats are 1 Hz: wait until every reader of the channel has one after the burst.
+has_beat_after() { # NAME UTIME
+  "$PT_LC" status "$LOG" "$1" --after-utime "$2" >/dev/null 2>&1
+}
+
+t_first=""
+for ch in "${CHANNELS[@]}"; do
+  a=$(pt_now_us)
+  [[ -n $t_first ]] || t_first=$a
+  out=$("$PT_INJ" --channel "$ch" 2>&1) || pt_fail "nudge-inject --channel $ch failed: $out"
+  b=$(pt_now_us)
+  nbad=$(awk -v k="inject_${ch}_bad" '$1 == k { print $2 }' <<<"$out")
+  ngar=$(awk -v k="inject_${ch}_garbage" '$1 == k { print $2 }' <<<"$out")
+  pt_figure "inject_${ch}_bad" "${nbad:-0}" count
+  pt_figure "inject_${ch}_garbage" "${ngar:-0}" count
+  # A heartbeat 0.2 s after the burst counts it: the planner handles input between plans
+  # (<= ~50 ms each) and publishes its heartbeat after that.
+  for name in ${READERS[$ch]}; do
+    if ! pt_wait_for 4 has_beat_after "$name" $((b + 200000)); then
+      pt_fail "$ch: no heartbeat of $name after the burst"
+      continue
+    fi
+    pt_val r0 status "$LOG" "$name" --before-utime "$a" rejected
+    pt_val r1 status "$LOG" "$name" --after-utime $((b + 200000)) rejected
+    d=$(( ${r1:-0} - ${r0:-0} ))
+    pt_figure "rejected_${ch}_${name#nudge-}" "$d" count
+    pt_check "$ch: $name counted each of the ${nbad:-?} bad messages (rejected +$d)" \
+      test -n "$r0" -a -n "$r1" -a "$d" -ge "${nbad:-1}"
+  done
+done
+t_last=$(pt_now_us)
+
+# STATUS garbage while nudge-status listens: it must not crash and go on printing.
+pt_spawn st "$PT_BIN/nudge-status" --timeout 3 >"$PT_WORK/status.out" 2>"$PT_WORK/status.err"
+sleep 0.5
+out=$("$PT_INJ" --channel STATUS 2>&1) || pt_fail "nudge-inject --channel STATUS failed: $out"
+pt_figure inject_STATUS_garbage "$(awk '$1 == "inject_STATUS_garbage" { print $2 }' <<<"$out")" count
+if pt_wait_pid "$st" 10; then
+  pt_check "nudge-status survived STATUS garbage (exit $PT_RC)" test "$PT_RC" -eq 0
+  n=$(grep -c '^nudge-' "$PT_WORK/status.out")
+  pt_check "nudge-status printed heartbeats after the garbage ($n lines)" test "$n" -ge 3
+else
+  pt_fail "nudge-status --timeout 3 did not exit"
+fi
+
+if pt_wait_pid "$tasks" 30; then
+  pt_check "nudge-tasks (running through the injections) exits 0 (got $PT_RC)" test "$PT_RC" -eq 0
+else
+  pt_fail "nudge-tasks did not finish within 30 s"
+fi
+cat "$PT_WORK/tasks.out"
+pt_check "EPISODE: the tasks run during the injections ended, at least one reached its goal" \
+  pt_lc episodes "$LOG" --min-start 2 --min-end 2 --min-success 1
+
+# Still working: a further task gets plans and smooth setpoints.
+t_after=$(pt_now_us)
+pt_spawn tasks2 "$PT_BIN/nudge-tasks" --goal 0.25,0.25,0.8 --tau 4 >"$PT_WORK/tasks2.out" \
+  2>"$PT_WORK/tasks2.err"
+pt_wait_pid "$tasks2" 20 || pt_fail "the further nudge-tasks did not finish within 20 s"
+cat "$PT_WORK/tasks2.out"
+pt_val nplans last "$LOG" PLAN --after-utime "$t_after" last_count
+pt_figure plans_after_injection "${nplans:-0}" count
+# A short push may end after a handful of plans: reaching the goal is proof enough.
+reached2=$(grep -c '^reached 1/1 goals' "$PT_WORK/tasks2.out")
+pt_check "after the injections a further task reached its goal or plans kept flowing (${nplans:-0} plans)" \
+  test "${nplans:-0}" -ge 1 -a \( "$reached2" -eq 1 -o "${nplans:-0}" -ge 10 \)
+pt_check "EE_CMD after the injections: no gap over 20 ms, continuous" \
+  pt_lc ee-cmd "$LOG" --max-gap-ms 20 --from-utime "$t_first"
+
+pt_check "no process died or was restarted (supervisor.log)" \
+  bash -c "! grep -E 'exited|restarted' '$RUN/supervisor.log'"
+pt_check "the same processes run as before the injections" \
+  test "$(pt_logged_pids "$RUN" | sort | tr '\n' ' ')" = "$pids_before"
+for p in $pids_before; do
+  [[ -d /proc/$p ]] || pt_fail "process $p is gone"
+done
+pt_up_stop "$up" 30
+pt_check "nudge-up run exits 0 after SIGINT (got $PT_RC)" test "$PT_RC" -eq 0
+pt_restarts_are "$RUN"
+pt_stop_logger
+for name in nudge-bridge nudge-executor nudge-planner nudge-adapter; do
+  pt_val rej status "$LOG" "$name" rejected
+  pt_figure "rejected_total_${name#nudge-}" "${rej:-0}" count
+done
+pt_none_left "$RUN"
+exit $((PT_FAILS > 0))
