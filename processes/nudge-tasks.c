@@ -5,7 +5,21 @@
  * The object is not reset between tasks (a real robot cannot do that): each goal starts
  * where the previous task left the object, so the default goals form a chain of short
  * pushes. Times are measured on this host's monotonic clock, from the TASK publication to
- * the arrival of the MOCAP frame that met the condition. */
+ * the arrival of the MOCAP frame that met the condition.
+ *
+ * With --record FILE each task's rollout goes into the replay buffer the adapter refits
+ * theta on (nd_rbuf.h), built from the live channels: the start state from the newest
+ * ROBOT_STATE (sphere) and MOCAP (object, at rest) when the task is issued, then one step
+ * per ROBOT_STATE (the bridge's world step: u = the force the robot applied during it, ee
+ * = the sphere after it), sp = the newest EE_CMD handled before that message (the bridge
+ * steps on the newest command it holds, which may be one message apart), obj = MOCAP
+ * interpolated to the step's time (frames come at 240 Hz, steps at 1 kHz, both stamped
+ * with the world step's time). Messages lost on the way show as gaps in ROBOT_STATE.seq:
+ * a gap of up to GAP_FILL_MAX steps is filled by linear interpolation between its two
+ * neighbours; a longer one, or more than FILL_MAX_FRAC of the steps filled, and the task
+ * is not recorded (an interpolated second of pushing would be made-up data). The arrays
+ * are allocated once for the longest task; the handlers only write into them; the
+ * append (encode, one write, fdatasync) happens after the task. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -14,6 +28,8 @@
 #include "nd_cost.h"
 #include "nd_math.h"
 #include "nd_parse.h"
+#include "nd_rbuf.h"
+#include "nds_model.h"
 #include "ndp.h"
 #include "ndp_goals.h"
 #include "ndp_validate.h"
@@ -21,6 +37,10 @@
 #define PROG "nudge-tasks"
 #define MAX_GOALS 1000
 #define MOCAP_GAP_WARN 0.5 /* s without a frame during a task before saying so */
+#define GAP_FILL_MAX 20    /* ROBOT_STATE steps a single filled gap may span */
+#define FILL_MAX_FRAC 0.02 /* of a task's steps, at most this many filled */
+#define DT_TOLERANCE 0.1   /* measured step period vs --record-dt, relative */
+#define RATE_QUEUE 1000    /* queue of the 1 kHz channels: a second of them */
 
 /* Start: object at rest at the origin, the bridge's sphere at (-0.10, 0). Each goal is a
  * 14-16 cm push from the previous one, so every task starts with the object near the last
@@ -40,9 +60,45 @@ typedef struct {
   double wait;      /* for the first MOCAP frame, s */
   double settle;    /* between tasks, s */
   const char *url;
+  const char *record;            /* replay buffer to append to; NULL: no recording */
+  double record_dt;              /* the bridge's world step, s */
+  double theta[NDS_NTHETA];      /* recorded as the planner's theta until PARAMS arrives */
+  double await_fit;              /* s to wait for the adapter's refit after a record; 0 none */
   ndp_goal goals[MAX_GOALS];
   int n;
 } tasks_cfg;
+
+/* The rollout being recorded: arrays for cap steps allocated at start; the handlers only
+ * write into them. */
+typedef struct {
+  nd_rfile_writer w;
+  double dt;
+  int cap;               /* steps (and MOCAP frames: at most one per step) the arrays hold */
+  nd_rollout r;          /* r.n is the capacity except during the append */
+  int64_t *step_us;      /* cap: each step's utime */
+  int64_t *frame_us;     /* cap: the task's MOCAP frames ... */
+  double *frame;         /* cap x 3: ... object x, y, yaw */
+  int nframes;
+  int on;                /* recording a task now */
+  int steps;
+  int64_t last_seq;      /* ROBOT_STATE.seq of the last step (the start state's at first) */
+  int64_t last_us;
+  double last_u[2], last_ee[2];
+  int64_t start_us;
+  int64_t filled, longest_gap;
+  int dropped;           /* steps past cap */
+  char broken[200];      /* why this task cannot be recorded; "" if it can */
+  /* the newest inputs, kept across tasks */
+  nudge_robot_state_t rs;
+  int have_rs;
+  nudge_ee_cmd_t cmd;
+  int have_cmd;
+  double theta[NDS_NTHETA];
+  int64_t theta_version; /* -1: --theta */
+  int32_t params_n;      /* rollouts the newest PARAMS was fitted on */
+  int64_t appended;
+  int last_ok;           /* the last task was appended */
+} recorder;
 
 /* What the LCM handlers update. */
 typedef struct {
@@ -53,6 +109,7 @@ typedef struct {
   ndp_status st;
   int64_t refused_logged;
   double log_next;
+  recorder *rec;      /* NULL without --record */
 } tasks_io;
 
 /* How one task ended. */
@@ -84,6 +141,228 @@ static void install_signals(void) {
   sigaction(SIGTERM, &sa, NULL);
 }
 
+/* Count a refused message; the first few reasons, then one every 10 s: a broken publisher
+ * must not flood. */
+static void refuse(tasks_io *io, const char *what, const char *why) {
+  io->st.rejected++;
+  double now = ndp_mono();
+  if (io->refused_logged < 3 || now >= io->log_next) {
+    fprintf(stderr, PROG ": refused %s (%lld so far): %s\n", what, (long long)io->st.rejected,
+            why);
+    io->refused_logged++;
+    io->log_next = now + 10.0;
+  }
+}
+
+/* ---- recording ---- */
+
+/* Allocate the recorder for tasks of up to tau s at step dt and open the buffer (a second
+ * writer is refused by its lock). Return 0, or -1 with a message. */
+static int rec_init(recorder *rc, const char *path, double tau, double dt,
+                    const double theta[NDS_NTHETA], char *err, int errlen) {
+  memset(rc, 0, sizeof(*rc));
+  rc->w.fd = -1;
+  rc->dt = dt;
+  memcpy(rc->theta, theta, sizeof(rc->theta));
+  rc->theta_version = -1;
+  /* Room for a task that overruns its limit a little (the runner checks it at 50 Hz) and
+   * for a bridge somewhat faster than dt says; what does not fit is cut off. */
+  const double n = ceil(1.25 * tau / dt) + 1000;
+  rc->cap = n > ND_ROLLOUT_MAX_STEPS ? ND_ROLLOUT_MAX_STEPS : (int)n;
+  rc->step_us = malloc(sizeof(int64_t) * rc->cap);
+  rc->frame_us = malloc(sizeof(int64_t) * rc->cap);
+  rc->frame = malloc(sizeof(double) * 3 * rc->cap);
+  if (nd_rollout_alloc(&rc->r, rc->cap) || !rc->step_us || !rc->frame_us || !rc->frame) {
+    snprintf(err, errlen, "%s: out of memory for %d steps", path, rc->cap);
+    return -1;
+  }
+  nd_rfile_tail repair;
+  if (nd_rbuf_open(&rc->w, path, &repair, err, errlen)) {
+    if (strstr(err, "locked"))
+      snprintf(err + strlen(err), errlen - strlen(err),
+               ": another nudge-tasks is recording into it");
+    return -1;
+  }
+  if (repair.status != ND_RFILE_END)
+    fprintf(stderr, PROG ": %s: cut off a %s tail: %s\n", path,
+            nd_rfile_status_name(repair.status), repair.why);
+  fprintf(stderr, PROG ": recording into %s (%lld rollouts there), up to %d steps of %g s\n",
+          path, (long long)rc->w.records, rc->cap, dt);
+  return 0;
+}
+
+static void rec_free(recorder *rc) {
+  nd_rfile_writer_close(&rc->w);
+  rc->r.n = rc->cap;
+  nd_rollout_free(&rc->r);
+  free(rc->step_us);
+  free(rc->frame_us);
+  free(rc->frame);
+}
+
+static void rec_frame(recorder *rc, const nudge_mocap_t *m) {
+  if (rc->nframes >= rc->cap) return;
+  if (rc->nframes > 0 && m->utime <= rc->frame_us[rc->nframes - 1]) return;
+  rc->frame_us[rc->nframes] = m->utime;
+  double *f = rc->frame + 3 * rc->nframes;
+  f[0] = m->obj_pos[0];
+  f[1] = m->obj_pos[1];
+  f[2] = nd_quat_yaw(m->obj_quat);
+  rc->nframes++;
+}
+
+/* Start recording task id toward goal g from the newest ROBOT_STATE and MOCAP frame m. */
+static void rec_begin(recorder *rc, const nudge_mocap_t *m, int64_t id, const nd_goal *g) {
+  nd_rollout *r = &rc->r;
+  rc->on = 1;
+  rc->steps = rc->nframes = rc->dropped = 0;
+  rc->filled = rc->longest_gap = 0;
+  rc->broken[0] = '\0';
+  if (!rc->have_rs) {
+    snprintf(rc->broken, sizeof(rc->broken),
+             "no ROBOT_STATE received before the task: is nudge-bridge publishing?");
+    return;
+  }
+  r->task_id = id;
+  r->utime = rc->rs.utime;
+  r->goal[0] = g->x;
+  r->goal[1] = g->y;
+  r->goal[2] = g->yaw;
+  memcpy(r->theta, rc->theta, sizeof(r->theta));
+  r->outcome = ND_OUTCOME_ABORTED;
+  r->control = ND_CTRL_FORCE;
+  r->dt = rc->dt;
+  memcpy(r->obj_pos, m->obj_pos, sizeof(r->obj_pos));
+  memcpy(r->obj_quat, m->obj_quat, sizeof(r->obj_quat));
+  memset(r->obj_vel, 0, sizeof(r->obj_vel));  /* at rest after the settle pause */
+  for (int k = 0; k < 2; k++) {
+    r->ee_pos[k] = rc->rs.ee_pos[k];
+    r->ee_vel[k] = rc->rs.ee_vel[k];
+    rc->last_u[k] = rc->rs.ee_force[k];
+    rc->last_ee[k] = rc->rs.ee_pos[k];
+  }
+  rc->last_seq = rc->rs.seq;
+  rc->last_us = rc->start_us = rc->rs.utime;
+  rec_frame(rc, m);
+}
+
+/* One step: control u during it, sphere ee after it, at utime us. */
+static void rec_push(recorder *rc, const double u[2], const double ee[2], int64_t us) {
+  if (rc->steps >= rc->cap) {
+    rc->dropped++;
+    return;
+  }
+  nd_rollout *r = &rc->r;
+  const int i = rc->steps++;
+  r->u[2 * i] = u[0];
+  r->u[2 * i + 1] = u[1];
+  r->ee[2 * i] = ee[0];
+  r->ee[2 * i + 1] = ee[1];
+  double *sp = r->sp + 6 * i;
+  if (rc->have_cmd) {
+    sp[0] = rc->cmd.p[0], sp[1] = rc->cmd.p[1];
+    sp[2] = rc->cmd.v[0], sp[3] = rc->cmd.v[1];
+    sp[4] = rc->cmd.a[0], sp[5] = rc->cmd.a[1];
+  } else {  /* no executor: the bridge holds the sphere where it started */
+    sp[0] = r->ee_pos[0], sp[1] = r->ee_pos[1];
+    sp[2] = sp[3] = sp[4] = sp[5] = 0.0;
+  }
+  rc->step_us[i] = us;
+}
+
+static void rec_step(recorder *rc, const nudge_robot_state_t *m) {
+  if (!rc->on || rc->broken[0]) return;
+  if (m->seq <= rc->last_seq) {
+    snprintf(rc->broken, sizeof(rc->broken),
+             "ROBOT_STATE seq went back from %lld to %lld (bridge restarted?)",
+             (long long)rc->last_seq, (long long)m->seq);
+    return;
+  }
+  const int64_t gap = m->seq - rc->last_seq - 1;
+  const double u[2] = {m->ee_force[0], m->ee_force[1]}, ee[2] = {m->ee_pos[0], m->ee_pos[1]};
+  if (gap > GAP_FILL_MAX) {
+    snprintf(rc->broken, sizeof(rc->broken),
+             "%lld ROBOT_STATE messages lost in a row after seq %lld (at most %d are filled)",
+             (long long)gap, (long long)rc->last_seq, GAP_FILL_MAX);
+    return;
+  }
+  for (int64_t j = 1; j <= gap; j++) {
+    const double f = (double)j / (double)(gap + 1);
+    const double uf[2] = {rc->last_u[0] + f * (u[0] - rc->last_u[0]),
+                          rc->last_u[1] + f * (u[1] - rc->last_u[1])};
+    const double ef[2] = {rc->last_ee[0] + f * (ee[0] - rc->last_ee[0]),
+                          rc->last_ee[1] + f * (ee[1] - rc->last_ee[1])};
+    rec_push(rc, uf, ef, rc->last_us + (int64_t)llround(f * (double)(m->utime - rc->last_us)));
+  }
+  rc->filled += gap;
+  if (gap > rc->longest_gap) rc->longest_gap = gap;
+  rec_push(rc, u, ee, m->utime);
+  rc->last_seq = m->seq;
+  rc->last_us = m->utime;
+  memcpy(rc->last_u, u, sizeof(u));
+  memcpy(rc->last_ee, ee, sizeof(ee));
+}
+
+/* The object at every step: MOCAP frames interpolated to the step's time, held beyond the
+ * first and last frame. */
+static void rec_objects(recorder *rc) {
+  int j = 0;
+  for (int i = 0; i < rc->steps; i++) {
+    const int64_t t = rc->step_us[i];
+    while (j + 1 < rc->nframes && rc->frame_us[j + 1] <= t) j++;
+    const double *a = rc->frame + 3 * j;
+    double *o = rc->r.obj + 3 * i;
+    if (j + 1 < rc->nframes && rc->frame_us[j] <= t) {
+      const double *b = a + 3;
+      const double f = (double)(t - rc->frame_us[j]) / (double)(rc->frame_us[j + 1] - rc->frame_us[j]);
+      o[0] = a[0] + f * (b[0] - a[0]);
+      o[1] = a[1] + f * (b[1] - a[1]);
+      o[2] = nd_wrap_angle(a[2] + f * nd_wrap_angle(b[2] - a[2]));
+    } else {
+      memcpy(o, a, 3 * sizeof(double));
+    }
+  }
+}
+
+/* Stop recording the task and append it with outcome (ND_OUTCOME_*), or say why not.
+ * A failure is reported and the runner goes on. */
+static void rec_finish(recorder *rc, int64_t id, int outcome) {
+  rc->last_ok = 0;
+  if (!rc->on) return;
+  rc->on = 0;
+  char why[600] = "";
+  const double period = rc->steps ? 1e-6 * (double)(rc->last_us - rc->start_us) / (rc->steps + 0.0) : 0;
+  if (rc->broken[0])
+    snprintf(why, sizeof(why), "%s", rc->broken);
+  else if (rc->steps == 0)
+    snprintf(why, sizeof(why), "no ROBOT_STATE arrived during the task");
+  else if (rc->filled > FILL_MAX_FRAC * rc->steps)
+    snprintf(why, sizeof(why), "%lld of %d steps lost (more than %.0f%% would be filled in)",
+             (long long)rc->filled, rc->steps, 100 * FILL_MAX_FRAC);
+  else if (rc->steps >= 100 && fabs(period - rc->dt) > DT_TOLERANCE * rc->dt)
+    snprintf(why, sizeof(why), "ROBOT_STATE came every %.3f ms, --record-dt is %.3f ms: a "
+             "replay would run at the wrong rate", 1e3 * period, 1e3 * rc->dt);
+  if (!why[0]) {
+    rc->r.outcome = outcome;
+    rec_objects(rc);
+    rc->r.n = rc->steps;
+    char err[512];
+    const int ok = nd_rbuf_append(&rc->w, &rc->r, err, sizeof(err)) == 0;
+    rc->r.n = rc->cap;
+    if (ok) {
+      rc->appended++;
+      rc->last_ok = 1;
+      fprintf(stderr, PROG ": task %lld recorded: %d steps (%lld filled, %d cut off), %d "
+              "MOCAP frames, record %lld of %s\n", (long long)id, rc->steps,
+              (long long)rc->filled, rc->dropped, rc->nframes, (long long)rc->w.records,
+              rc->w.path);
+      return;
+    }
+    snprintf(why, sizeof(why), "%s", err);
+  }
+  fprintf(stderr, PROG ": task %lld not recorded: %s\n", (long long)id, why);
+}
+
 static void on_mocap(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_mocap_t *m,
                      void *user) {
   (void)rbuf;
@@ -91,15 +370,7 @@ static void on_mocap(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_moc
   tasks_io *io = user;
   char why[200];
   if (ndp_check_mocap(m, why, sizeof(why))) {
-    io->st.rejected++;
-    /* The first few reasons, then one every 10 s: a broken publisher must not flood. */
-    double now = ndp_mono();
-    if (io->refused_logged < 3 || now >= io->log_next) {
-      fprintf(stderr, PROG ": refused MOCAP frame (%lld so far): %s\n",
-              (long long)io->st.rejected, why);
-      io->refused_logged++;
-      io->log_next = now + 10.0;
-    }
+    refuse(io, "MOCAP frame", why);
     return;
   }
   io->last = *m;
@@ -107,6 +378,54 @@ static void on_mocap(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_moc
   io->frames++;
   io->fresh = 1;
   io->st.received++;
+  if (io->rec && io->rec->on) rec_frame(io->rec, m);
+}
+
+static void on_robot_state(const lcm_recv_buf_t *rbuf, const char *ch,
+                           const nudge_robot_state_t *m, void *user) {
+  (void)rbuf;
+  (void)ch;
+  tasks_io *io = user;
+  char why[200];
+  if (ndp_check_robot_state(m, why, sizeof(why))) {
+    refuse(io, "ROBOT_STATE", why);
+    return;
+  }
+  io->st.received++;
+  io->rec->rs = *m;
+  io->rec->have_rs = 1;
+  rec_step(io->rec, m);
+}
+
+static void on_ee_cmd(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_ee_cmd_t *m,
+                      void *user) {
+  (void)rbuf;
+  (void)ch;
+  tasks_io *io = user;
+  char why[200];
+  if (ndp_check_ee_cmd(m, why, sizeof(why))) {
+    refuse(io, "EE_CMD", why);
+    return;
+  }
+  io->st.received++;
+  io->rec->cmd = *m;
+  io->rec->have_cmd = 1;
+}
+
+static void on_params(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_params_t *m,
+                      void *user) {
+  (void)rbuf;
+  (void)ch;
+  tasks_io *io = user;
+  char why[200];
+  if (ndp_check_params(m, why, sizeof(why))) {
+    refuse(io, "PARAMS", why);
+    return;
+  }
+  io->st.received++;
+  memcpy(io->rec->theta, m->theta_mean, sizeof(io->rec->theta));
+  io->rec->theta_version = m->version;
+  io->rec->params_n = m->buffer_size;
 }
 
 static double yaw_error(double yaw, double goal_yaw) {
@@ -188,6 +507,7 @@ static int run_task(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, const ndp_goal
   t.goal_yaw = g->yaw;
   t.eps = eps;
   t.time_limit = tau;
+  if (io->rec) rec_begin(io->rec, &io->last, id, &goal);
   const double t0 = ndp_mono();
   if (nudge_task_t_publish(lcm, NDP_CH_TASK, &t) != 0) goto fail;
   io->st.published++;
@@ -286,12 +606,46 @@ static void usage(FILE *f) {
           "  --workspace M       goals beyond |x| or |y| > M are rejected, default 0.5 m\n"
           "  --wait S            wait for the first MOCAP frame, default 10 s\n"
           "  --settle S          pause between tasks so the object comes to rest, default 0.5 s\n"
+          "  --record FILE       append each task's rollout (start state, 1 kHz forces,\n"
+          "                      setpoints, observed path) to the replay buffer FILE, created\n"
+          "                      if missing, for nudge-adapter; one writer at a time\n"
+          "  --record-dt S       the bridge's world step, s (default 0.001 = its --rate 1000);\n"
+          "                      a task whose ROBOT_STATE period differs is not recorded\n"
+          "  --theta S,T,R,M     theta recorded as the planner's until PARAMS arrives\n"
+          "                      (default: the simulation's ground truth, as the planner)\n"
+          "  --await-fit S       with --record: after appending a task, wait up to S s for\n"
+          "                      PARAMS fitted on it before the next task (the paper's\n"
+          "                      protocol: refit between episodes); default 0, no wait\n"
           "  --lcm-url URL       default $LCM_DEFAULT_URL, else " NDP_DEFAULT_URL "\n"
           "  -h, --help          this text\n\n"
           "Prints one line per task, summary figures as 'name value unit' lines, and ends with\n"
           "'reached K/N goals'. Exit status: 0 every task ran (reached, timed out or rejected),\n"
           "1 the tasks could not be run (no MOCAP, LCM failure), 2 bad arguments,\n"
           "128+n when stopped by signal n (SIGINT: 130), after printing what ran.\n");
+}
+
+/* Parse "s,t,r,m" into theta. Return 0, or -1 with a message. */
+static int parse_theta(const char *s, double theta[NDS_NTHETA], char *err, int errlen) {
+  static const char *what[NDS_NTHETA] = {"--theta sliding friction", "--theta torsional friction",
+                                         "--theta rolling friction", "--theta sphere mass"};
+  char buf[256];
+  if (strlen(s) >= sizeof(buf)) {
+    snprintf(err, errlen, "--theta: value too long");
+    return -1;
+  }
+  strcpy(buf, s);
+  char *p = buf;
+  for (int i = 0; i < NDS_NTHETA; i++) {
+    char *comma = strchr(p, ',');
+    if ((i < NDS_NTHETA - 1) != (comma != NULL)) {
+      snprintf(err, errlen, "--theta: expected 4 comma-separated numbers, got '%s'", s);
+      return -1;
+    }
+    if (comma) *comma = '\0';
+    if (nd_parse_double(p, what[i], 0.0, 1e4, &theta[i], err, errlen)) return -1;
+    p = comma ? comma + 1 : p;
+  }
+  return nds_theta_check(theta, err, errlen);
 }
 
 /* Parse argv into c. 0 to run, 1 for --help, -1 with a message on a bad argument. */
@@ -302,13 +656,19 @@ static int parse_args(int argc, char **argv, tasks_cfg *c, char *err, int errlen
   c->wait = 10.0;
   c->settle = 0.5;
   c->url = NULL;
+  c->record = NULL;
+  c->record_dt = 0.001;
+  c->await_fit = 0.0;
+  memcpy(c->theta, nds_theta_true, sizeof(c->theta));
   c->n = 0;
   for (int i = 1; i < argc; i++) {
     const char *a = argv[i];
     if (!strcmp(a, "-h") || !strcmp(a, "--help")) return 1;
     int known = !strcmp(a, "--goal") || !strcmp(a, "--goals") || !strcmp(a, "--eps") ||
                 !strcmp(a, "--tau") || !strcmp(a, "--workspace") || !strcmp(a, "--wait") ||
-                !strcmp(a, "--settle") || !strcmp(a, "--lcm-url");
+                !strcmp(a, "--settle") || !strcmp(a, "--lcm-url") || !strcmp(a, "--record") ||
+                !strcmp(a, "--record-dt") || !strcmp(a, "--theta") ||
+                !strcmp(a, "--await-fit");
     if (!known) {
       snprintf(err, errlen, "unknown argument: %s", a);
       return -1;
@@ -342,10 +702,22 @@ static int parse_args(int argc, char **argv, tasks_cfg *c, char *err, int errlen
       rc = nd_parse_double(v, "--wait", 0.0, 3600.0, &c->wait, err, errlen);
     } else if (!strcmp(a, "--settle")) {
       rc = nd_parse_double(v, "--settle", 0.0, 3600.0, &c->settle, err, errlen);
+    } else if (!strcmp(a, "--record")) {
+      c->record = v;
+    } else if (!strcmp(a, "--record-dt")) {
+      rc = nd_parse_double(v, "--record-dt", 1e-5, 0.05, &c->record_dt, err, errlen);
+    } else if (!strcmp(a, "--theta")) {
+      rc = parse_theta(v, c->theta, err, errlen);
+    } else if (!strcmp(a, "--await-fit")) {
+      rc = nd_parse_double(v, "--await-fit", 0.0, 3600.0, &c->await_fit, err, errlen);
     } else {
       c->url = v;
     }
     if (rc) return -1;
+  }
+  if (c->await_fit > 0 && !c->record) {
+    snprintf(err, errlen, "--await-fit needs --record (it waits for the fit of a record)");
+    return -1;
   }
   if (c->n == 0) {
     c->n = (int)(sizeof(default_goals) / sizeof(default_goals[0]));
@@ -369,17 +741,50 @@ int main(int argc, char **argv) {
     return 2;
   }
   install_signals();
+  /* A file-size limit must fail the append (EFBIG, reported), not kill the runner. */
+  signal(SIGXFSZ, SIG_IGN);
+
+  static recorder rec;
+  if (cfg.record) {
+    double tau_max = cfg.tau;
+    for (int i = 0; i < cfg.n; i++) tau_max = fmax(tau_max, cfg.goals[i].tau);
+    if (rec_init(&rec, cfg.record, tau_max, cfg.record_dt, cfg.theta, err, sizeof(err))) {
+      fprintf(stderr, PROG ": --record %s\n", err);
+      rec_free(&rec);
+      return 1;
+    }
+  }
 
   const char *url = ndp_url(cfg.url);
   lcm_t *lcm = ndp_lcm_create(url, err, sizeof(err));
   if (!lcm) {
     fprintf(stderr, PROG ": %s\n", err);
+    if (cfg.record) rec_free(&rec);
     return 1;
   }
   static tasks_io io;
   ndp_status_init(&io.st, PROG);
   io.st.state = "waiting";
   nudge_mocap_t_subscription_t *sub = nudge_mocap_t_subscribe(lcm, NDP_CH_MOCAP, on_mocap, &io);
+  nudge_robot_state_t_subscription_t *sub_rs = NULL;
+  nudge_ee_cmd_t_subscription_t *sub_cmd = NULL;
+  nudge_params_t_subscription_t *sub_par = NULL;
+  if (cfg.record) {
+    io.rec = &rec;
+    sub_rs = nudge_robot_state_t_subscribe(lcm, NDP_CH_ROBOT_STATE, on_robot_state, &io);
+    sub_cmd = nudge_ee_cmd_t_subscribe(lcm, NDP_CH_EE_CMD, on_ee_cmd, &io);
+    sub_par = nudge_params_t_subscribe(lcm, NDP_CH_PARAMS, on_params, &io);
+    /* The runner handles input every 20 ms and appends (one fdatasync) between tasks: a
+     * default queue of 30 would drop 1 kHz messages (the newest, as seq gaps). */
+    if (!sub_rs || !sub_cmd || !sub_par ||
+        nudge_robot_state_t_subscription_set_queue_capacity(sub_rs, RATE_QUEUE) ||
+        nudge_ee_cmd_t_subscription_set_queue_capacity(sub_cmd, RATE_QUEUE)) {
+      fprintf(stderr, PROG ": subscribing to ROBOT_STATE, EE_CMD, PARAMS failed\n");
+      lcm_destroy(lcm);
+      rec_free(&rec);
+      return 1;
+    }
+  }
   fprintf(stderr, PROG ": %d goal(s), eps %g, tau %g s, workspace %.2f m, settle %g s, lcm %s\n",
           cfg.n, cfg.eps, cfg.tau, cfg.workspace, cfg.settle, url);
 
@@ -407,6 +812,11 @@ int main(int argc, char **argv) {
       goto done;
     }
     print_result(i, cfg.n, &cfg.goals[i], &r);
+    if (cfg.record)
+      rec_finish(&rec, id0 + i,
+                 r.interrupted ? ND_OUTCOME_ABORTED
+                 : r.event == NUDGE_EPISODE_T_EVENT_SUCCESS ? ND_OUTCOME_SUCCESS
+                                                           : ND_OUTCOME_TIMEOUT);
     if (r.interrupted) break;
     ran++;
     if (r.event != NUDGE_EPISODE_T_EVENT_REJECTED) {
@@ -416,6 +826,23 @@ int main(int argc, char **argv) {
     if (r.event == NUDGE_EPISODE_T_EVENT_SUCCESS) {
       reached++;
       t_sum += r.time;
+    }
+    if (i + 1 < cfg.n && cfg.await_fit > 0 && rec.last_ok) {
+      /* The adapter's PARAMS says how many rollouts its fit used; the count may stay
+       * below ours if it refused one, hence the limit. */
+      io.st.state = "awaiting fit";
+      const double t0 = ndp_mono(), t_end = t0 + cfg.await_fit;
+      while (!ndp_quit && ndp_mono() < t_end && rec.params_n < rec.w.records)
+        if (pump(lcm, &io, fmin(0.05, t_end - ndp_mono()), err, sizeof(err))) {
+          fprintf(stderr, PROG ": %s\n", err);
+          goto done;
+        }
+      if (rec.params_n >= rec.w.records)
+        fprintf(stderr, PROG ": PARAMS version %lld (fitted on %d rollouts) after %.2f s\n",
+                (long long)rec.theta_version, (int)rec.params_n, ndp_mono() - t0);
+      else if (!ndp_quit)
+        fprintf(stderr, PROG ": no PARAMS fitted on %lld rollouts within %g s; going on\n",
+                (long long)rec.w.records, cfg.await_fit);
     }
     if (i + 1 < cfg.n && r.event != NUDGE_EPISODE_T_EVENT_REJECTED) {
       io.st.state = "settling";
@@ -435,6 +862,7 @@ int main(int argc, char **argv) {
   printf("tasks_reached %d count\n", reached);
   if (reached) printf("reach_time_mean %.3f s\n", t_sum / reached);
   if (attempted) printf("final_pos_err_mean %.4f m\n", pos_sum / attempted);
+  if (cfg.record) printf("tasks_recorded %lld count\n", (long long)rec.appended);
   if (ndp_quit)
     printf("reached %d/%d goals (interrupted: %d of %d tasks ran)\n", reached, ran, ran,
            cfg.n);
@@ -445,6 +873,10 @@ int main(int argc, char **argv) {
 done:
   if (status == 1 && ndp_quit) status = 128 + (quit_sig ? quit_sig : SIGINT);
   nudge_mocap_t_unsubscribe(lcm, sub);
+  if (sub_rs) nudge_robot_state_t_unsubscribe(lcm, sub_rs);
+  if (sub_cmd) nudge_ee_cmd_t_unsubscribe(lcm, sub_cmd);
+  if (sub_par) nudge_params_t_unsubscribe(lcm, sub_par);
   lcm_destroy(lcm);
+  if (cfg.record) rec_free(&rec);
   return status;
 }

@@ -1,0 +1,331 @@
+/* Process test of the adaptation loop: `nudge-up run` (bridge, executor, planner,
+ * adapter) on a replay buffer, nudge-tasks recording one task at a time into it.
+ *
+ *   netns-run test_proc_adapter BUILD_DIR/bin
+ *
+ *
+ * 1. One task in the running system appends exactly one more valid rollout to the buffer,
+ *    and a PARAMS message with the next version, fitted on that many rollouts, arrives.
+ * 2. A SIGKILLed and restarted adapter goes on from its history: it republishes the
+ *    version it had reached (>= 2, so a refit from scratch, version 1, cannot pass for
+ *    it) without refitting, and the next task gives the version after.
+ *    The supervisor restarts the killed adapter (its backoff), as it would in use.
+ *
+ * Runs under tests/netns-run, which provides the private namespaces and LCM_DEFAULT_URL
+ * (and reports 77, skipped, where namespaces cannot be made). Ends by itself: every wait
+ * has a deadline, and the supervisor is stopped with SIGINT (SIGKILL after 20 s). */
+#define _GNU_SOURCE
+#include "nd_test.h"
+
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <lcm/lcm.h>
+
+#include "nd_rbuf.h"
+#include "nudge/nudge_params_t.h"
+#include "nudge/nudge_status_t.h"
+
+extern char **environ;
+
+/* Straight pushes along x; eps 1e-3 (~3 cm) so each task is a real push of the object. */
+#define EPS "1e-3"
+#define TAU "2"
+
+/* A deliberately wrong initial theta, as the loop is meant to start. */
+#define THETA "0.6,0.005,0.0001,1"
+
+enum { P_BRIDGE, P_EXECUTOR, P_PLANNER, P_ADAPTER, NPROC };
+static const char *names[NPROC] = {"bridge", "executor", "planner", "adapter"};
+
+typedef struct {
+  char bin[512], dir[256], buffer[320];
+  pid_t up;                   /* nudge-up */
+  lcm_t *lcm;
+  nudge_params_t_subscription_t *sub_params;
+  nudge_status_t_subscription_t *sub_status;
+  /* newest PARAMS */
+  int have_params;
+  int64_t version;
+  int32_t buffer_size;
+  int64_t params_seen;
+  /* newest heartbeat per process */
+  pid_t hb_pid[NPROC];
+} world;
+
+static world W;
+
+static double mono(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+static void on_params(const lcm_recv_buf_t *rb, const char *ch, const nudge_params_t *m,
+                      void *user) {
+  (void)rb;
+  (void)ch;
+  (void)user;
+  W.have_params = 1;
+  W.version = m->version;
+  W.buffer_size = m->buffer_size;
+  W.params_seen++;
+}
+
+static void on_status(const lcm_recv_buf_t *rb, const char *ch, const nudge_status_t *m,
+                      void *user) {
+  (void)rb;
+  (void)ch;
+  (void)user;
+  for (int i = 0; i < NPROC; i++) {
+    char want[64];
+    snprintf(want, sizeof(want), "nudge-%s", names[i]);
+    if (!strcmp(m->name, want)) W.hb_pid[i] = m->pid;
+  }
+}
+
+/* Handle LCM for s seconds. */
+static void pump(double s) {
+  const double end = mono() + s;
+  for (double now = mono(); now < end; now = mono()) {
+    int ms = (int)(1e3 * (end - now)) + 1;
+    lcm_handle_timeout(W.lcm, ms > 100 ? 100 : ms);
+  }
+}
+
+/* Start nudge-<name> with args (NULL-terminated), output appended to <dir>/<name>.out. */
+static pid_t spawn(const char *name, const char *const *args) {
+  char path[640], log[320];
+  snprintf(path, sizeof(path), "%s/nudge-%s", W.bin, name);
+  snprintf(log, sizeof(log), "%s/%s.out", W.dir, name);
+  const char *argv[32] = {path};
+  for (int i = 0; args[i] && i < 30; i++) argv[i + 1] = args[i];
+  posix_spawn_file_actions_t fa;
+  posix_spawn_file_actions_init(&fa);
+  posix_spawn_file_actions_addopen(&fa, 0, "/dev/null", O_RDONLY, 0);
+  posix_spawn_file_actions_addopen(&fa, 1, log, O_WRONLY | O_CREAT | O_APPEND, 0644);
+  posix_spawn_file_actions_adddup2(&fa, 1, 2);
+  pid_t pid = -1;
+  int rc = posix_spawn(&pid, path, &fa, NULL, (char *const *)argv, environ);
+  posix_spawn_file_actions_destroy(&fa);
+  if (rc) {
+    fprintf(stderr, "cannot start %s: %s\n", path, strerror(rc));
+    return -1;
+  }
+  return pid;
+}
+
+/* Wait up to s seconds for a heartbeat of process i from a pid other than not (0: any). */
+static int wait_heartbeat(int i, pid_t not, double s) {
+  const double end = mono() + s;
+  while (mono() < end) {
+    if (W.hb_pid[i] > 0 && W.hb_pid[i] != not) return 1;
+    pump(0.1);
+  }
+  return 0;
+}
+
+/* Run one task toward goal "x,y,yaw" with recording; return nudge-tasks' exit status. */
+static int run_task(const char *goal) {
+  const char *args[] = {"--record", W.buffer, "--goal", goal, "--eps", EPS, "--tau", TAU,
+                        "--wait", "5", "--settle", "0", NULL};
+  pid_t pid = spawn("tasks", args);
+  if (pid < 0) return -1;
+  /* Keep handling LCM so PARAMS published meanwhile are seen. */
+  int st = 0;
+  for (;;) {
+    pid_t r = waitpid(pid, &st, WNOHANG);
+    if (r == pid) break;
+    pump(0.1);
+  }
+  return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
+}
+
+/* Rollouts in the buffer; all must decode (nd_rbuf_read_all refuses otherwise). */
+static int buffer_count(nd_rollout **rs) {
+  char err[512];
+  int n = 0;
+  nd_rfile_tail tail;
+  struct stat st;
+  if (stat(W.buffer, &st) != 0) return 0;
+  if (nd_rbuf_read_all(W.buffer, rs, &n, &tail, err, sizeof(err))) fail_msg("%s", err);
+  assert_int_equal(tail.status, ND_RFILE_END);
+  return n;
+}
+
+/* Wait up to s seconds for PARAMS with version v; return 1 when seen. */
+static int wait_version(int64_t v, double s) {
+  const double end = mono() + s;
+  while (mono() < end) {
+    if (W.have_params && W.version == v) return 1;
+    pump(0.1);
+  }
+  return 0;
+}
+
+static void one_task_one_record_one_version(void **state) {
+  (void)state;
+  nd_rollout *rs = NULL;
+  const int n0 = buffer_count(&rs);
+  nd_rbuf_free_all(rs, n0);
+  const int64_t v0 = W.have_params ? W.version : 0;
+
+  assert_int_equal(run_task("0.15,0,0"), 0);
+  const int n1 = buffer_count(&rs);
+  assert_int_equal(n1, n0 + 1);
+  const nd_rollout *r = &rs[n1 - 1];
+  /* A task of at most 2 s at 1 kHz (it may end early on success). */
+  assert_true(r->n >= 50 && r->n <= 2100);
+  assert_near(r->dt, 0.001, 0.0);
+  assert_int_equal(r->control, ND_CTRL_FORCE);
+  assert_true(r->outcome == ND_OUTCOME_SUCCESS || r->outcome == ND_OUTCOME_TIMEOUT);
+  assert_near(r->goal[0], 0.15, 1e-12);
+  /* The sphere was pushed toward the goal and the setpoints went with it. */
+  assert_true(r->ee[2 * (r->n - 1)] - r->ee_pos[0] > 0.02);
+  assert_true(r->sp[6 * (r->n - 1)] - r->ee_pos[0] > 0.02);
+  assert_true(r->obj[3 * (r->n - 1)] - r->obj_pos[0] > 0.005);
+  nd_rbuf_free_all(rs, n1);
+
+  if (!wait_version(v0 + 1, 60.0))
+    fail_msg("no PARAMS version %lld within 60 s (newest: %lld)", (long long)(v0 + 1),
+             (long long)W.version);
+  assert_int_equal(W.buffer_size, n1);
+}
+
+static void killed_adapter_resumes(void **state) {
+  (void)state;
+  /* Two fits at least before the kill: an adapter that ignored its history would refit
+   * the buffer as version 1, which must not pass for a resumed version. */
+  if (!W.have_params) one_task_one_record_one_version(state);
+  nd_rollout *rs = NULL;
+  assert_int_equal(run_task("0.28,0,0"), 0);
+  const int n0 = buffer_count(&rs);
+  nd_rbuf_free_all(rs, n0);
+  const int64_t v = W.version + 1;
+  assert_true(v >= 2);
+  if (!wait_version(v, 60.0))
+    fail_msg("no PARAMS version %lld within 60 s (newest: %lld)", (long long)v,
+             (long long)W.version);
+  assert_int_equal(W.buffer_size, n0);
+  pump(1.5); /* idle: no refit pending */
+  assert_int_equal(W.version, v);
+
+  /* The adapter the supervisor started: the pid of its heartbeats. */
+  const pid_t old = W.hb_pid[P_ADAPTER];
+  assert_true(old > 0);
+  assert_int_equal(kill(old, SIGKILL), 0);
+  pump(0.05);
+  W.have_params = 0;
+  W.version = -1;
+  W.params_seen = 0;
+  /* The supervisor notices within 0.2 s and restarts it after its first backoff, 0.2 s. */
+  if (!wait_heartbeat(P_ADAPTER, old, 15.0))
+    fail_msg("no heartbeat of a restarted nudge-adapter within 15 s (see %s/run)", W.dir);
+  /* It republishes the version it reached, and does not refit a covered buffer. */
+  pump(2.5);
+  assert_true(W.params_seen >= 2);
+  assert_int_equal(W.version, v);
+
+  assert_int_equal(W.buffer_size, n0);
+
+  /* The next task's refit continues the numbering. */
+  assert_int_equal(run_task("0.40,0,0"), 0);
+  const int n = buffer_count(&rs);
+  nd_rbuf_free_all(rs, n);
+  if (!wait_version(v + 1, 60.0))
+    fail_msg("no PARAMS version %lld within 60 s after the restart (newest: %lld)",
+             (long long)(v + 1), (long long)W.version);
+  assert_int_equal(W.buffer_size, n);
+}
+
+/* SIGINT to the supervisor (it stops the processes in order); SIGKILL after 20 s.
+ * Return its exit status. */
+static int stop_up(void) {
+  if (W.up <= 0) return -1;
+  kill(W.up, SIGINT);
+  const double end = mono() + 20.0;
+  int st = 0;
+  while (waitpid(W.up, &st, WNOHANG) == 0) {
+    if (mono() > end) {
+      fprintf(stderr, "nudge-up did not stop within 20 s of SIGINT: SIGKILL\n");
+      kill(W.up, SIGKILL);
+      waitpid(W.up, &st, 0);
+      break;
+    }
+    usleep(20000);
+  }
+  W.up = 0;
+  return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
+}
+
+static int setup(void **state) {
+  (void)state;
+  const char *url = getenv("LCM_DEFAULT_URL");
+  if (!url) {
+    fprintf(stderr, "test_proc_adapter: run me under tests/netns-run\n");
+    return -1;
+  }
+  snprintf(W.dir, sizeof(W.dir), "/tmp/nd_proc_adapter_XXXXXX");
+  if (!mkdtemp(W.dir)) return -1;
+  snprintf(W.buffer, sizeof(W.buffer), "%s/replay.nrb", W.dir);
+  W.lcm = lcm_create(url);
+  if (!W.lcm) {
+    fprintf(stderr, "lcm_create(%s) failed: no multicast route?\n", url);
+    return -1;
+  }
+  W.sub_params = nudge_params_t_subscribe(W.lcm, "PARAMS", on_params, NULL);
+  W.sub_status = nudge_status_t_subscribe(W.lcm, "STATUS", on_status, NULL);
+
+  char logdir[320];
+  snprintf(logdir, sizeof(logdir), "%s/run", W.dir);
+  const char *args[] = {"run", "--log-dir", logdir, "--buffer", W.buffer, "--theta", THETA,
+                        "--planner-arg", "--threads", "--planner-arg", "1",
+                        "--adapter-arg", "--threads", "--adapter-arg", "1", NULL};
+  W.up = spawn("up", args);
+  for (int i = 0; i < NPROC; i++)
+    if (W.up < 0 || !wait_heartbeat(i, 0, 30.0)) {
+      fprintf(stderr, "nudge-%s did not come up (see %s)\n", names[i], logdir);
+      stop_up();
+      return -1;
+    }
+  return 0;
+}
+
+static int teardown(void **state) {
+  (void)state;
+  const int rc = stop_up();
+  if (W.lcm) {
+    nudge_params_t_unsubscribe(W.lcm, W.sub_params);
+    nudge_status_t_unsubscribe(W.lcm, W.sub_status);
+    lcm_destroy(W.lcm);
+  }
+  char cmd[400];
+  if (rc != 0 || getenv("ND_KEEP")) {
+    fprintf(stderr, "nudge-up exited with %d; logs kept in %s\n", rc, W.dir);
+  } else {
+    snprintf(cmd, sizeof(cmd), "rm -rf '%s'", W.dir);
+    if (system(cmd) != 0) fprintf(stderr, "could not remove %s\n", W.dir);
+  }
+  return rc == 0 ? 0 : -1;
+}
+
+int main(int argc, char **argv) {
+  if (argc != 2) {
+    fprintf(stderr, "usage: netns-run test_proc_adapter BIN_DIR\n");
+    return 2;
+  }
+  snprintf(W.bin, sizeof(W.bin), "%s", argv[1]);
+  signal(SIGPIPE, SIG_IGN);
+  const struct CMUnitTest tests[] = {
+      cmocka_unit_test(one_task_one_record_one_version),
+      cmocka_unit_test(killed_adapter_resumes),
+  };
+  return cmocka_run_group_tests(tests, setup, teardown);
+}
