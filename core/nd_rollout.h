@@ -15,7 +15,7 @@
  * field little-endian, doubles as IEEE-754 binary64 bit patterns (bitwise round trip):
  *
  *   offset  size  field
- *        0     4  u32 encoding version (1)
+ *        0     4  u32 encoding version (2)
  *        4     4  i32 n, steps
  *        8     8  i64 task_id
  *       16     8  i64 utime

@@ -96,7 +96,7 @@ int nds_episode_run(const nds_model *world, mjData *d, nds_planner *planner,
     d->qfrc_applied[world->ee_dof[0]] = force[0];
     d->qfrc_applied[world->ee_dof[1]] = force[1];
     mj_step(world->m, d);
-    if (hook) hook(hook_ctx, world, d, force);
+    if (hook) hook(hook_ctx, world, d, (const double(*)[4])sp, force);
   }
   out->plan_ms = out->plans ? 1e3 * plan_wall / out->plans : 0.0;
   return 0;

@@ -22,9 +22,11 @@ typedef struct {
 
 void nds_episode_cfg_default(nds_episode_cfg *cfg);
 
-/* Called after every world step with the force the controller applied (for recording). */
+/* Called after every world step (for recording) with the setpoint the controller tracked
+ * during the step, sp[axis][p, v, a, j], and the force it applied. The controller used
+ * p, v and a of sp: nds_ctrl_pid on them reproduces force (see nds_replay.h, SETPOINT). */
 typedef void (*nds_episode_hook)(void *ctx, const nds_model *world, const mjData *d,
-                                 const double force[2]);
+                                 const double sp[2][4], const double force[2]);
 
 typedef struct {
   int reached;         /* task error fell below eps within tau */

@@ -35,13 +35,14 @@ typedef struct {
   double k1, k2;               /* weights of L_pos,ee (1) and L_rot,o (m^2/rad) */
   int prune;                   /* 1: stop replaying a candidate once it cannot be an elite
                                   (same results, less work: see nds_fit.c); 0: replay all */
-  nds_ctrl_cfg ctrl;           /* the velocity controller of velocity-mode replays */
+  nds_replay_cfg replay;       /* how rollouts are replayed (mode, robot controller) */
   uint64_t seed;
 } nds_fit_cfg;
 
 /* Paper settings: Q 32, C 2, rho 0.2, fitting the three frictions with the mass held;
  * prior at nds_theta_true with the paper's D = 0.2 std; lower 1e-7; std_floor 0.5;
- * k1 = 1, k2 = 1e-3 m^2/rad (reasons in nds_fit.c); prune; default controller; seed 1. */
+ * k1 = 1, k2 = 1e-3 m^2/rad (reasons in nds_fit.c); prune; SETPOINT replay with the
+ * default controller (measured against FORCE in nds_fit.c); seed 1. */
 void nds_fit_cfg_default(nds_fit_cfg *cfg);
 
 /* Check cfg. Return 0, or -1 naming the bad field. */

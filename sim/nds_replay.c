@@ -1,4 +1,5 @@
-/* nds_replay: open-loop replay of a recorded rollout and its loss terms. */
+/* nds_replay: replay of a recorded rollout (forces, velocities or setpoints) and its loss
+ * terms. */
 #include "nds_replay.h"
 
 #include <math.h>
@@ -6,6 +7,7 @@
 #include <string.h>
 
 #include "nd_math.h"
+#include "nd_snap.h"
 
 /* As in nds_rollout: every warning counter starts here, so any warning during the replay
  * (including the one MuJoCo counts again after resetting a bad state) leaves some counter
@@ -15,6 +17,37 @@
 /* A model step may be this far (relative) from k record steps and still count as k:
  * timesteps written as decimals do not divide exactly in binary. */
 #define RATIO_TOL 1e-9
+
+void nds_replay_cfg_default(nds_replay_cfg *cfg, int mode) {
+  cfg->mode = mode;
+  nds_ctrl_cfg_default(&cfg->ctrl);
+}
+
+const char *nds_replay_mode_name(int mode) {
+  switch (mode) {
+    case NDS_REPLAY_FORCE: return "force";
+    case NDS_REPLAY_VELOCITY: return "velocity";
+    case NDS_REPLAY_SETPOINT: return "setpoint";
+    default: return "?";
+  }
+}
+
+void nds_replay_sp_put(double row[6], const double sp[2][4]) {
+  for (int a = 0; a < 2; a++) {
+    row[a] = sp[a][ND_P];
+    row[2 + a] = sp[a][ND_V];
+    row[4 + a] = sp[a][ND_A];
+  }
+}
+
+void nds_replay_sp_get(const double row[6], double sp[2][4]) {
+  for (int a = 0; a < 2; a++) {
+    sp[a][ND_P] = row[a];
+    sp[a][ND_V] = row[2 + a];
+    sp[a][ND_A] = row[4 + a];
+    sp[a][ND_J] = 0;
+  }
+}
 
 int nds_replay_ratio(const nds_model *nm, const nd_rollout *r, char *err, int errlen) {
   if (r->control != ND_CTRL_FORCE && r->control != ND_CTRL_VELOCITY) {
@@ -26,7 +59,7 @@ int nds_replay_ratio(const nds_model *nm, const nd_rollout *r, char *err, int er
              ND_ROLLOUT_MAX_STEPS);
     return -1;
   }
-  if (!r->u || !r->obj || !r->ee) {
+  if (!r->u || !r->obj || !r->ee || !r->sp) {
     snprintf(err, errlen, "replay: record of %d steps has no step arrays", (int)r->n);
     return -1;
   }
@@ -63,7 +96,8 @@ int nds_replay_check(const nds_model *nm, const nd_rollout *r, char *err, int er
   } f[] = {{"obj_pos", r->obj_pos, 3}, {"obj_quat", r->obj_quat, 4},
            {"obj_vel", r->obj_vel, 6}, {"ee_pos", r->ee_pos, 2},
            {"ee_vel", r->ee_vel, 2},   {"u", r->u, 2 * r->n},
-           {"obj", r->obj, 3 * r->n},  {"ee", r->ee, 2 * r->n}};
+           {"obj", r->obj, 3 * r->n},  {"ee", r->ee, 2 * r->n},
+           {"sp", r->sp, 6 * r->n}};
   for (size_t i = 0; i < sizeof(f) / sizeof(f[0]); i++) {
     for (int j = 0; j < f[i].n; j++) {
       if (!isfinite(f[i].v[j])) {
@@ -116,13 +150,28 @@ static void diverge(nds_replay_terms *out) {
 }
 
 /* The replay; stops once sp + k1 se + k2 sr > bound T (never for bound = INFINITY). */
-static int replay(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl, const nd_rollout *r,
-                  double k1, double k2, double bound, nds_replay_terms *out, double *pred,
-                  char *err, int errlen) {
+static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
+                  const nd_rollout *r, double k1, double k2, double bound,
+                  nds_replay_terms *out, double *pred, char *err, int errlen) {
   memset(out, 0, sizeof(*out)); /* padding too, so terms compare bytewise */
   int k = nds_replay_ratio(nm, r, err, errlen);
   if (k < 0) return -1;
+  const int mode = cfg->mode;
+  if (mode != NDS_REPLAY_FORCE && mode != NDS_REPLAY_VELOCITY && mode != NDS_REPLAY_SETPOINT) {
+    snprintf(err, errlen, "replay: unknown replay mode %d", mode);
+    return -1;
+  }
+  /* A force taken for a velocity (or back) would replay nonsense that still scores. */
+  if ((mode == NDS_REPLAY_FORCE && r->control != ND_CTRL_FORCE) ||
+      (mode == NDS_REPLAY_VELOCITY && r->control != ND_CTRL_VELOCITY)) {
+    snprintf(err, errlen, "replay: %s mode cannot replay a %s record (control %d)",
+             nds_replay_mode_name(mode), r->control == ND_CTRL_FORCE ? "force" : "velocity",
+             (int)r->control);
+    return -1;
+  }
   const mjModel *m = nm->m;
+  const nds_ctrl_cfg *ctrl = &cfg->ctrl;
+  const int qx = nm->ee_qpos[0], qy = nm->ee_qpos[1];
   const int T = r->n / k; /* a trailing partial model step is not replayed */
   const int dof0 = nm->ee_dof[0], dof1 = nm->ee_dof[1];
   out->steps = T;
@@ -136,26 +185,33 @@ static int replay(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl, cons
   double sp = 0, se = 0, sr = 0;
   const double limit = bound * T;
   int cut = 0;
+  nds_ctrl pid;
+  nds_ctrl_reset(&pid);
+  const double mdt = m->opt.timestep;
   for (; j < T && !diverged && !cut; j++) {
     const int base = j * k;
-    /* The mean of the k recorded controls: for k = 1 exactly the recorded one. */
-    double u[2] = {0, 0};
-    for (int i = 0; i < k; i++) {
-      u[0] += r->u[2 * (base + i)];
-      u[1] += r->u[2 * (base + i) + 1];
-    }
-    u[0] /= k;
-    u[1] /= k;
-    if (r->control == ND_CTRL_FORCE) {
-      d->qfrc_applied[dof0] = u[0];
-      d->qfrc_applied[dof1] = u[1];
+    const double vel[2] = {d->qvel[dof0], d->qvel[dof1]};
+    double f[2];
+    if (mode == NDS_REPLAY_SETPOINT) {
+      /* Exactly the episode's controller call: raw slide qpos, the model's step. */
+      double s[2][4];
+      nds_replay_sp_get(r->sp + 6 * base, s);
+      const double pos[2] = {d->qpos[qx], d->qpos[qy]};
+      nds_ctrl_pid(ctrl, &pid, (const double(*)[4])s, pos, vel, mdt, f);
     } else {
-      const double vel[2] = {d->qvel[dof0], d->qvel[dof1]};
-      double f[2];
-      nds_ctrl_vel(ctrl, u, vel, f);
-      d->qfrc_applied[dof0] = f[0];
-      d->qfrc_applied[dof1] = f[1];
+      /* The mean of the k recorded controls: for k = 1 exactly the recorded one. */
+      double u[2] = {0, 0};
+      for (int i = 0; i < k; i++) {
+        u[0] += r->u[2 * (base + i)];
+        u[1] += r->u[2 * (base + i) + 1];
+      }
+      u[0] /= k;
+      u[1] /= k;
+      if (mode == NDS_REPLAY_FORCE) f[0] = u[0], f[1] = u[1];
+      else nds_ctrl_vel(ctrl, u, vel, f);
     }
+    d->qfrc_applied[dof0] = f[0];
+    d->qfrc_applied[dof1] = f[1];
     mj_step(m, d);
     for (int w = 0; w < mjNWARNING; w++)
       if (d->warning[w].number != WARN_START) diverged = 1;
@@ -195,15 +251,15 @@ static int replay(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl, cons
   return 0;
 }
 
-int nds_replay(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl, const nd_rollout *r,
+int nds_replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg, const nd_rollout *r,
                nds_replay_terms *out, double *pred, char *err, int errlen) {
-  return replay(nm, d, ctrl, r, 0, 0, INFINITY, out, pred, err, errlen);
+  return replay(nm, d, cfg, r, 0, 0, INFINITY, out, pred, err, errlen);
 }
 
-int nds_replay_bounded(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
+int nds_replay_bounded(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
                        const nd_rollout *r, double k1, double k2, double bound,
                        nds_replay_terms *out, char *err, int errlen) {
-  return replay(nm, d, ctrl, r, k1, k2, bound, out, NULL, err, errlen);
+  return replay(nm, d, cfg, r, k1, k2, bound, out, NULL, err, errlen);
 }
 
 double nds_replay_loss(const nds_replay_terms *t, double k1, double k2) {

@@ -1,15 +1,30 @@
 /* nds_replay: replaying a recorded rollout in the model, and how far the model strays.
  *
- * The replay starts the model in the rollout's initial state and applies its recorded
- * controls open-loop: in force mode u is the force on the sphere's two dofs, in velocity
- * mode the sphere tracks u with the robot's velocity controller (nds_ctrl_vel). After
- * each step the model's object (x, y, yaw) and sphere (x, y) are compared with what was
- * observed, giving one rollout's terms of the adaptation loss (DESIGN.md sec. 4):
+ * The replay starts the model in the rollout's initial state and drives the sphere in one
+ * of three modes (nds_replay_cfg.mode):
+ *   FORCE     u of a force record is the force on the sphere's two dofs, open loop (the
+ *             paper's simulation replay);
+ *   VELOCITY  the sphere tracks u of a velocity record with nds_ctrl_vel (the paper's
+ *             robot replay);
+ *   SETPOINT  the recorded setpoints sp go through the robot's tracking controller
+ *             nds_ctrl_pid, integral reset at the start: closed loop, as the recording
+ *             ran. Any record (both kinds carry sp).
+ * After each step the model's object (x, y, yaw) and sphere (x, y) are compared with what
+ * was observed, giving one rollout's terms of the adaptation loss (DESIGN.md sec. 4):
  *
  *   L = L_pos,o + k1 L_pos,ee + k2 L_rot,o, each term 1/T sum over the T compared steps.
  *
+ * Why SETPOINT. An open-loop force replay under a candidate theta lets the sphere drift
+ * from the recorded path as soon as contact differs (a slipperier box resists less, the
+ * same force throws the sphere further), so the loss mixes the parameter's effect with a
+ * growing sphere error and is rough in theta. The PID keeps the sphere on the commanded
+ * path, as the real controller did, and the loss sees the object's response. Under the
+ * recording theta both are exact: the PID recomputes the recorded force bit for bit.
+ *
  * A model whose timestep is k times the record's (k a whole number) replays k recorded
- * steps per model step with their mean control and compares every k-th observation. */
+ * steps per model step and compares every k-th observation: FORCE and VELOCITY with the
+ * mean of the k controls, SETPOINT with the setpoint of the block's first step and the
+ * controller run at the model's step (a slower controller sampling the same setpoints). */
 #ifndef NDS_REPLAY_H
 #define NDS_REPLAY_H
 
@@ -21,6 +36,20 @@
  * above anything a replay that stays finite on a table can reach (a 1 km mean error), yet
  * finite, so CEM still ranks it and a buffer's summed loss stays a number. */
 #define NDS_REPLAY_DIVERGED 1e6
+
+/* How the sphere is driven (see above). */
+enum { NDS_REPLAY_FORCE = 0, NDS_REPLAY_VELOCITY = 1, NDS_REPLAY_SETPOINT = 2 };
+
+typedef struct {
+  int mode;            /* NDS_REPLAY_* */
+  nds_ctrl_cfg ctrl;   /* the robot's controller: VELOCITY uses kv, SETPOINT the PID */
+} nds_replay_cfg;
+
+/* mode with the default controller (nds_ctrl_cfg_default). */
+void nds_replay_cfg_default(nds_replay_cfg *cfg, int mode);
+
+/* "force", "velocity", "setpoint"; "?" for an unknown mode. */
+const char *nds_replay_mode_name(int mode);
 
 /* One rollout's loss terms. */
 typedef struct {
@@ -38,27 +67,28 @@ typedef struct {
 
 /* Model steps per record step for replaying r in nm: k >= 1 when the model's timestep is
  * k times r->dt (within 1e-9 relative), else -1 with a message. Also checks the shape of
- * r (n >= k, known control mode, arrays present), not its values. */
+ * r (n >= k, known control mode, all four step arrays present), not its values. */
 int nds_replay_ratio(const nds_model *nm, const nd_rollout *r, char *err, int errlen);
 
 /* nds_replay_ratio plus every value: finite initial state with a non-zero quaternion,
- * finite controls and observations. Scans the whole record: call it once per record,
+ * finite controls, setpoints and observations. Scans the whole record: call it once per record,
  * not per replay. Return 0, or -1 naming the first bad value. */
 int nds_replay_check(const nds_model *nm, const nd_rollout *r, char *err, int errlen);
 
 /* Replay r in nm (any theta) on d (scratch: any prior content, overwritten; its warning
- * counters are preset so MuJoCo does not print for divergences reported here). ctrl is
- * used in velocity mode only. pred, if not NULL, receives n / k rows of
- * NDS_REPLAY_PRED_COLS (rows after a divergence are NaN). Allocates nothing. Return 0
- * with out filled, or -1 with a message if nds_replay_ratio refuses r (out zeroed). A
- * record with bad values that nds_replay_check would refuse replays as diverged. */
-int nds_replay(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl, const nd_rollout *r,
+ * counters are preset so MuJoCo does not print for divergences reported here) as cfg says.
+ * pred, if not NULL, receives n / k rows of NDS_REPLAY_PRED_COLS (rows after a divergence
+ * are NaN). Allocates nothing. Return 0 with out filled, or -1 with a message if
+ * nds_replay_ratio refuses r, the mode is unknown, or FORCE / VELOCITY meets a record of
+ * the other control kind (out zeroed). A record with bad values that nds_replay_check
+ * would refuse replays as diverged. */
+int nds_replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg, const nd_rollout *r,
                nds_replay_terms *out, double *pred, char *err, int errlen);
 
 /* nds_replay without a prediction that gives up as soon as the rollout's L (weights k1,
  * k2) must exceed bound: out->cut = 1 then. bound = INFINITY replays in full, exactly as
  * nds_replay does. For a search that needs only the candidates below some threshold. */
-int nds_replay_bounded(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
+int nds_replay_bounded(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
                        const nd_rollout *r, double k1, double k2, double bound,
                        nds_replay_terms *out, char *err, int errlen);
 
@@ -69,8 +99,13 @@ double nds_replay_loss(const nds_replay_terms *t, double k1, double k2);
  * exact: the observation read from d (object x, y, yaw; sphere x, y) ... */
 void nds_replay_observe(const nds_model *nm, const mjData *d, double obj[3], double ee[2]);
 
-/* ... and the initial state, copied between a record and an nds_state. */
+/* ... the initial state, copied between a record and an nds_state ... */
 void nds_replay_start_get(const nd_rollout *r, nds_state *s);
 void nds_replay_start_put(nd_rollout *r, const nds_state *s);
+
+/* ... and the setpoint of a step: row[6] = (px, py, vx, vy, ax, ay) of sp[axis][p, v, a, j]
+ * (the PID does not use jerk; get sets it to 0). */
+void nds_replay_sp_put(double row[6], const double sp[2][4]);
+void nds_replay_sp_get(const double row[6], double sp[2][4]);
 
 #endif

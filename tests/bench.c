@@ -89,6 +89,7 @@ static int record_push5(const nds_model *w, mjData *d, int i, nd_rollout *r) {
     const double pos[2] = {d->qpos[w->ee_qpos[0]], d->qpos[w->ee_qpos[1]]};
     const double vel[2] = {d->qvel[w->ee_dof[0]], d->qvel[w->ee_dof[1]]};
     nds_ctrl_pid(&ctrl, &pid, (const double(*)[4])sp, pos, vel, dt, r->u + 2 * k);
+    nds_replay_sp_put(r->sp + 6 * k, (const double(*)[4])sp);
     d->qfrc_applied[w->ee_dof[0]] = r->u[2 * k];
     d->qfrc_applied[w->ee_dof[1]] = r->u[2 * k + 1];
     mj_step(w->m, d);
@@ -261,9 +262,10 @@ int main(int argc, char **argv) {
   }
 
   /* 5. The adapter's refit: CEM at the paper's Q 32, C 2 on 2 workers over a buffer of ten
-   * 5 s pushes recorded in the 1 ms world, from a D = 1 prior; replayed in a 1 ms model
-   * and, two record steps per model step, in a 2 ms one (whose replay of the true theta is
-   * no longer exact: its L(theta_true) says how far the coarse step alone strays). */
+   * 5 s pushes recorded in the 1 ms world, from a D = 1 prior; in the fit's default replay
+   * mode in a 1 ms model and, two record steps per model step, in a 2 ms one (whose replay
+   * of the true theta is no longer exact: its L(theta_true) says how far the coarse step
+   * alone strays), and in the other replay mode at 1 ms for comparison. */
   enum { NREC = 10 };
   nd_rollout recs[NREC];
   for (int i = 0; i < NREC; i++) {
@@ -277,13 +279,19 @@ int main(int argc, char **argv) {
     fprintf(stderr, "nudge-bench: %s\n", err);
     return 1;
   }
-  double refit_s[2] = {0}, fit_dt[2] = {0.001, 0.002};
-  for (int k = 0; k < 2; k++) {
+  nds_fit_cfg dcfg;
+  nds_fit_cfg_default(&dcfg);
+  const int dmode = dcfg.replay.mode;
+  const int omode = dmode == NDS_REPLAY_SETPOINT ? NDS_REPLAY_FORCE : NDS_REPLAY_SETPOINT;
+  double refit_s[3] = {0}, fit_dt[3] = {0.001, 0.002, 0.001};
+  const int fit_mode[3] = {dmode, dmode, omode};
+  for (int k = 0; k < 3; k++) {
     nds_scene_cfg fc = wc;
     fc.timestep = fit_dt[k];
     nds_model fm = {0};
     nds_fit_cfg cfg;
     nds_fit_cfg_default(&cfg);
+    cfg.replay.mode = fit_mode[k];
     nd_rng rr;
     nd_rng_seed(&rr, 1, 7);
     nds_fit_paper_prior(nds_theta_true, 1.0, cfg.lower, &rr, cfg.mu0, cfg.sigma0);
@@ -303,10 +311,11 @@ int main(int argc, char **argv) {
       return 1;
     }
     refit_s[k] = now_s() - t0;
-    printf("refit %d x 5 s, Q %d C %d, 2 workers, model dt %.3f s: %.2f s (%d replays), "
-           "sliding %.3f -> %.3f, L(mean) %.3g, L(theta_true) %.3g\n",
-           NREC, cfg.pop, cfg.iters, fit_dt[k], refit_s[k], fo.replays, cfg.mu0[0], fo.mean[0],
-           fo.loss_mean, l_true);
+    printf("refit %d x 5 s, Q %d C %d, 2 workers, %s replay%s, model dt %.3f s: %.2f s "
+           "(%d replays), sliding %.3f -> %.3f, L(mean) %.3g, L(theta_true) %.3g\n",
+           NREC, cfg.pop, cfg.iters, nds_replay_mode_name(fit_mode[k]),
+           fit_mode[k] == dmode ? " (default)" : "", fit_dt[k], refit_s[k], fo.replays,
+           cfg.mu0[0], fo.mean[0], fo.loss_mean, l_true);
     nds_fit_free(fit);
     nds_model_free(&fm);
   }
@@ -314,6 +323,9 @@ int main(int argc, char **argv) {
   for (int i = 0; i < NREC; i++) nd_rollout_free(&recs[i]);
   printf("refit_s_10x5s %.2f s\n", refit_s[0]);
   printf("refit_s_10x5s_2ms %.2f s\n", refit_s[1]);
+  /* Both modes by name; refit_s_10x5s is the default's. */
+  printf("refit_s_10x5s_%s %.2f s\n", nds_replay_mode_name(dmode), refit_s[0]);
+  printf("refit_s_10x5s_%s %.2f s\n", nds_replay_mode_name(omode), refit_s[2]);
 
   printf("mj_step_rate %.0f steps/s\n", raw_rate);
   printf("rollout_ratio_1w %.3f ratio\n", rate[1] / raw_rate);

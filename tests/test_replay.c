@@ -36,19 +36,20 @@ static void rec_free(nd_rollout *r) { nd_rollout_free(r); }
 
 static void rec_copy(nd_rollout *dst, const nd_rollout *src) {
   rec_alloc(dst, src->n, src->dt, src->control);
-  double *u = dst->u, *o = dst->obj, *e = dst->ee;
+  double *u = dst->u, *o = dst->obj, *e = dst->ee, *sp = dst->sp;
   *dst = *src;
-  dst->u = u, dst->obj = o, dst->ee = e;
+  dst->u = u, dst->obj = o, dst->ee = e, dst->sp = sp;
   memcpy(u, src->u, sizeof(double) * 2 * src->n);
   memcpy(o, src->obj, sizeof(double) * 3 * src->n);
   memcpy(e, src->ee, sizeof(double) * 2 * src->n);
+  memcpy(sp, src->sp, sizeof(double) * 6 * src->n);
 }
 
 /* Record a push the way the episode loop runs the world: set the start state, then per
  * 1 kHz step the tracking controller's force toward a min-snap chain through keys (M
  * segments of T, then holding the last keypoint for `tail` s), mj_step, observe. The
  * force is what a force-mode record holds; a velocity-mode record holds the sphere's
- * velocity after the step. */
+ * velocity after the step. Both hold the setpoint the controller tracked. */
 static void record_push(const nds_model *nm, mjData *d, double yaw, const double ee0[2],
                         const double *keys, int M, double T, double tail, int control,
                         nd_rollout *r) {
@@ -80,6 +81,7 @@ static void record_push(const nds_model *nm, mjData *d, double yaw, const double
     const double vel[2] = {d->qvel[nm->ee_dof[0]], d->qvel[nm->ee_dof[1]]};
     double f[2];
     nds_ctrl_pid(&ctrl, &c, (const double(*)[4])s, pos, vel, dt, f);
+    nds_replay_sp_put(r->sp + 6 * k, (const double(*)[4])s);
     d->qfrc_applied[nm->ee_dof[0]] = f[0];
     d->qfrc_applied[nm->ee_dof[1]] = f[1];
     mj_step(nm->m, d);
@@ -124,13 +126,13 @@ static int teardown(void **state) {
 }
 
 static double buffer_loss(const nds_model *nm, mjData *d, const nd_rollout *rs, int n) {
-  nds_ctrl_cfg ctrl;
-  nds_ctrl_cfg_default(&ctrl);
+  nds_replay_cfg rc;
+  nds_replay_cfg_default(&rc, NDS_REPLAY_FORCE);
   char err[256];
   double L = 0;
   for (int i = 0; i < n; i++) {
     nds_replay_terms t;
-    assert_int_equal(nds_replay(nm, d, &ctrl, &rs[i], &t, NULL, err, sizeof(err)), 0);
+    assert_int_equal(nds_replay(nm, d, &rc, &rs[i], &t, NULL, err, sizeof(err)), 0);
     assert_int_equal(t.diverged, 0);
     L += nds_replay_loss(&t, 1.0, 1e-3);
   }
@@ -150,33 +152,39 @@ static void test_replay_exact(void **state) {
   nds_model nm;
   build(&nm, 0.001, NULL);
   mjData *d = mj_makeData(nm.m);
-  nds_ctrl_cfg ctrl;
-  nds_ctrl_cfg_default(&ctrl);
+  nds_replay_cfg rc;
+  nds_replay_cfg_default(&rc, NDS_REPLAY_FORCE);
   char err[256];
-  for (int i = 0; i < NPUSH; i++) {
-    const nd_rollout *r = &push[i];
-    assert_int_equal(nds_replay_ratio(&nm, r, err, sizeof(err)), 1);
-    assert_int_equal(nds_replay_check(&nm, r, err, sizeof(err)), 0);
-    double *pred = malloc(sizeof(double) * NDS_REPLAY_PRED_COLS * r->n);
-    nds_replay_terms t;
-    assert_int_equal(nds_replay(&nm, d, &ctrl, r, &t, pred, err, sizeof(err)), 0);
-    assert_int_equal(t.diverged, 0);
-    assert_int_equal(t.steps, r->n);
-    assert_true(t.pos_o == 0 && t.pos_ee == 0 && t.rot_o == 0);
-    for (int k = 0; k < r->n; k++) {
-      assert_memory_equal(pred + 5 * k, r->obj + 3 * k, 3 * sizeof(double));
-      assert_memory_equal(pred + 5 * k + 3, r->ee + 2 * k, 2 * sizeof(double));
+  /* Setpoint mode too: the PID recomputes the recorded force from the recorded setpoint
+   * and the replayed state, which equals the recorded state as long as the forces agree. */
+  for (int mode = NDS_REPLAY_FORCE; mode <= NDS_REPLAY_SETPOINT; mode += 2) {
+    nds_replay_cfg mc;
+    nds_replay_cfg_default(&mc, mode);
+    for (int i = 0; i < NPUSH; i++) {
+      const nd_rollout *r = &push[i];
+      assert_int_equal(nds_replay_ratio(&nm, r, err, sizeof(err)), 1);
+      assert_int_equal(nds_replay_check(&nm, r, err, sizeof(err)), 0);
+      double *pred = malloc(sizeof(double) * NDS_REPLAY_PRED_COLS * r->n);
+      nds_replay_terms t;
+      assert_int_equal(nds_replay(&nm, d, &mc, r, &t, pred, err, sizeof(err)), 0);
+      assert_int_equal(t.diverged, 0);
+      assert_int_equal(t.steps, r->n);
+      assert_true(t.pos_o == 0 && t.pos_ee == 0 && t.rot_o == 0);
+      for (int k = 0; k < r->n; k++) {
+        assert_memory_equal(pred + 5 * k, r->obj + 3 * k, 3 * sizeof(double));
+        assert_memory_equal(pred + 5 * k + 3, r->ee + 2 * k, 2 * sizeof(double));
+      }
+      free(pred);
     }
-    free(pred);
   }
   /* A dirty mjData: a replay under another theta ran on it first. */
   const double other[NDS_NTHETA] = {0.5, 0.02, 1e-3, 2.0};
   nds_model nb;
   build(&nb, 0.001, other);
   nds_replay_terms t;
-  assert_int_equal(nds_replay(&nb, d, &ctrl, &push[1], &t, NULL, err, sizeof(err)), 0);
+  assert_int_equal(nds_replay(&nb, d, &rc, &push[1], &t, NULL, err, sizeof(err)), 0);
   assert_true(t.pos_o > 0);
-  assert_int_equal(nds_replay(&nm, d, &ctrl, &push[1], &t, NULL, err, sizeof(err)), 0);
+  assert_int_equal(nds_replay(&nm, d, &rc, &push[1], &t, NULL, err, sizeof(err)), 0);
   assert_true(t.pos_o == 0 && t.pos_ee == 0 && t.rot_o == 0);
   assert_near(nds_replay_loss(&t, 1, 1e-3), 0, 0);
   nds_model_free(&nb);
@@ -219,13 +227,13 @@ static void test_replay_ratio(void **state) {
   const double thB[NDS_NTHETA] = {0.5, 0.005, 1e-4, 1.0};
   build(&m2b, 0.002, thB);
   mjData *d = mj_makeData(m2.m);
-  nds_ctrl_cfg ctrl;
-  nds_ctrl_cfg_default(&ctrl);
+  nds_replay_cfg rc;
+  nds_replay_cfg_default(&rc, NDS_REPLAY_FORCE);
   char err[256];
   for (int i = 0; i < NPUSH; i++) {
     nds_replay_terms t;
     assert_int_equal(nds_replay_ratio(&m2, &push[i], err, sizeof(err)), 2);
-    assert_int_equal(nds_replay(&m2, d, &ctrl, &push[i], &t, NULL, err, sizeof(err)), 0);
+    assert_int_equal(nds_replay(&m2, d, &rc, &push[i], &t, NULL, err, sizeof(err)), 0);
     assert_int_equal(t.steps, push[i].n / 2);
     double La = nds_replay_loss(&t, 1, 1e-3), Lb = buffer_loss(&m2b, d, &push[i], 1);
     printf("loss_2ms_true_push%d %.2e (pos_o %.2e, rot_o %.2e) vs slide 0.5: %.3f\n", i, La,
@@ -245,7 +253,7 @@ static void test_replay_ratio(void **state) {
   for (int k = 0; k < r.n; k++) r.u[2 * k] = k % 2 ? -3 : 3;
   double pred[101 * NDS_REPLAY_PRED_COLS];
   nds_replay_terms t;
-  assert_int_equal(nds_replay(&m2, d, &ctrl, &r, &t, pred, err, sizeof(err)), 0);
+  assert_int_equal(nds_replay(&m2, d, &rc, &r, &t, pred, err, sizeof(err)), 0);
   assert_int_equal(t.steps, 50);
   for (int k = 0; k < 50; k++) {
     assert_true(pred[5 * k + 3] == ee[0]);
@@ -254,7 +262,7 @@ static void test_replay_ratio(void **state) {
   nds_model m1;
   build(&m1, 0.001, NULL);
   mjData *d1 = mj_makeData(m1.m);
-  assert_int_equal(nds_replay(&m1, d1, &ctrl, &r, &t, pred, err, sizeof(err)), 0);
+  assert_int_equal(nds_replay(&m1, d1, &rc, &r, &t, pred, err, sizeof(err)), 0);
   assert_int_equal(t.steps, 101);
   assert_true(pred[3] != ee[0]);
 
@@ -267,7 +275,7 @@ static void test_replay_ratio(void **state) {
     assert_int_equal(nds_replay_ratio(&mb, &r, err, sizeof(err)), -1);
     assert_non_null(strstr(err, "whole multiple"));
     t.steps = 7;
-    assert_int_equal(nds_replay(&mb, db, &ctrl, &r, &t, NULL, err, sizeof(err)), -1);
+    assert_int_equal(nds_replay(&mb, db, &rc, &r, &t, NULL, err, sizeof(err)), -1);
     assert_int_equal(t.steps, 0);
     mj_deleteData(db);
     nds_model_free(&mb);
@@ -309,14 +317,14 @@ static void test_replay_velocity(void **state) {
   }
   for (int k = 0; k < n; k++) r.obj[3 * k] = r.obj[3 * k + 1] = 0;
   mjData *d = mj_makeData(nm.m);
-  nds_ctrl_cfg ctrl;
-  nds_ctrl_cfg_default(&ctrl);
+  nds_replay_cfg rc;
+  nds_replay_cfg_default(&rc, NDS_REPLAY_VELOCITY);
   double pred[500 * NDS_REPLAY_PRED_COLS];
   nds_replay_terms t1, t2;
   char err[256];
-  assert_int_equal(nds_replay(&nm, d, &ctrl, &r, &t1, pred, err, sizeof(err)), 0);
+  assert_int_equal(nds_replay(&nm, d, &rc, &r, &t1, pred, err, sizeof(err)), 0);
   /* v_k = v (1 - (1 - a)^k), a = kv dt / m; x_N = x_0 + dt sum_{k=1..N} v_k. */
-  double a = ctrl.kv * dt / 1.0, x = ee[0], vk = 0;
+  double a = rc.ctrl.kv * dt / 1.0, x = ee[0], vk = 0;
   for (int k = 0; k < n; k++) {
     vk += a * (v - vk);
     x += dt * vk;
@@ -328,7 +336,7 @@ static void test_replay_velocity(void **state) {
 
   const double heavy[NDS_NTHETA] = {1, 0.005, 1e-4, 2.0};
   assert_int_equal(nds_theta_apply(&nm, heavy, err, sizeof(err)), 0);
-  assert_int_equal(nds_replay(&nm, d, &ctrl, &r, &t2, NULL, err, sizeof(err)), 0);
+  assert_int_equal(nds_replay(&nm, d, &rc, &r, &t2, NULL, err, sizeof(err)), 0);
   printf("velocity_replay_pos_ee mass1 %.3e mass2 %.3e m^2\n", t1.pos_ee, t2.pos_ee);
   assert_true(t2.pos_ee > 2 * t1.pos_ee);
   assert_true(t1.pos_o < 1e-20);  /* the box was never touched */
@@ -344,8 +352,8 @@ static void test_replay_bad_records(void **state) {
   nds_model nm;
   build(&nm, 0.001, NULL);
   mjData *d = mj_makeData(nm.m);
-  nds_ctrl_cfg ctrl;
-  nds_ctrl_cfg_default(&ctrl);
+  nds_replay_cfg rc;
+  nds_replay_cfg_default(&rc, NDS_REPLAY_FORCE);
   char err[256];
   nd_rollout r;
   rec_copy(&r, &push[0]);
@@ -355,14 +363,14 @@ static void test_replay_bad_records(void **state) {
   assert_non_null(strstr(err, "u[1401]"));
   double *pred = malloc(sizeof(double) * NDS_REPLAY_PRED_COLS * r.n);
   nds_replay_terms t;
-  assert_int_equal(nds_replay(&nm, d, &ctrl, &r, &t, pred, err, sizeof(err)), 0);
+  assert_int_equal(nds_replay(&nm, d, &rc, &r, &t, pred, err, sizeof(err)), 0);
   assert_int_equal(t.diverged, 1);
   assert_near(t.pos_o, NDS_REPLAY_DIVERGED, 0);
   assert_near(nds_replay_loss(&t, 1, 1e-3), NDS_REPLAY_DIVERGED * (2 + 1e-3), 1e-6);
   assert_true(isfinite(pred[5 * 699]) && isnan(pred[5 * 700]) && isnan(pred[5 * r.n - 1]));
   r.u[2 * 700 + 1] = push[0].u[2 * 700 + 1];
   /* The same mjData replays cleanly afterwards. */
-  assert_int_equal(nds_replay(&nm, d, &ctrl, &r, &t, NULL, err, sizeof(err)), 0);
+  assert_int_equal(nds_replay(&nm, d, &rc, &r, &t, NULL, err, sizeof(err)), 0);
   assert_true(t.diverged == 0 && t.pos_o == 0);
 
   r.obj[3 * 5 + 2] = INFINITY;
@@ -380,9 +388,27 @@ static void test_replay_bad_records(void **state) {
   assert_int_equal(nds_replay_check(&nm, &r, err, sizeof(err)), 0);
 
   r.control = 7;
-  assert_int_equal(nds_replay(&nm, d, &ctrl, &r, &t, NULL, err, sizeof(err)), -1);
+  assert_int_equal(nds_replay(&nm, d, &rc, &r, &t, NULL, err, sizeof(err)), -1);
   assert_non_null(strstr(err, "control mode"));
+  /* A velocity record is no force record (and back); setpoints replay from either. */
+  r.control = ND_CTRL_VELOCITY;
+  assert_int_equal(nds_replay(&nm, d, &rc, &r, &t, NULL, err, sizeof(err)), -1);
+  assert_non_null(strstr(err, "force mode cannot replay a velocity record"));
+  nds_replay_cfg sc;
+  nds_replay_cfg_default(&sc, NDS_REPLAY_SETPOINT);
+  assert_int_equal(nds_replay(&nm, d, &sc, &r, &t, NULL, err, sizeof(err)), 0);
+  assert_true(t.diverged == 0 && t.pos_o == 0 && t.pos_ee == 0);
   r.control = ND_CTRL_FORCE;
+  sc.mode = NDS_REPLAY_VELOCITY;
+  assert_int_equal(nds_replay(&nm, d, &sc, &r, &t, NULL, err, sizeof(err)), -1);
+  assert_non_null(strstr(err, "velocity mode cannot replay a force record"));
+  sc.mode = 3;
+  assert_int_equal(nds_replay(&nm, d, &sc, &r, &t, NULL, err, sizeof(err)), -1);
+  assert_non_null(strstr(err, "replay mode 3"));
+  r.sp[6 * 9 + 4] = NAN;
+  assert_int_equal(nds_replay_check(&nm, &r, err, sizeof(err)), -1);
+  assert_non_null(strstr(err, "sp[58]"));
+  r.sp[6 * 9 + 4] = push[0].sp[6 * 9 + 4];
   r.dt = 0;
   assert_int_equal(nds_replay_ratio(&nm, &r, err, sizeof(err)), -1);
   assert_non_null(strstr(err, "dt"));
@@ -432,7 +458,10 @@ static void test_torsion_landscape(void **state) {
 /* The paper's simulation study on a small scale: the three frictions fitted, the mass
  * held, the initial mean drawn from U(theta - D theta, theta + D theta) with D = 1 and the
  * paper's std; Q = 16, C = 3, two refits on the same buffer, as after two episodes. The
- * std floor (sigma0 / 2) lets the mean travel the ~0.5 the draw put it away. */
+ * std floor (sigma0 / 2) lets the mean travel the ~0.5 the draw put it away. Force replay
+ * (the paper's): on these slow pushes the box follows the sphere whatever the table's
+ * friction, so a setpoint replay, which holds the sphere on its path, sees sliding friction
+ * only through the little dynamics there is; it gets half-way (checked at the end). */
 static void test_fit_recovers_sliding(void **state) {
   (void)state;
   char err[256];
@@ -445,6 +474,7 @@ static void test_fit_recovers_sliding(void **state) {
   cfg.pop = 16;
   cfg.iters = 3;
   cfg.seed = 11;
+  cfg.replay.mode = NDS_REPLAY_FORCE;
   nd_rng r;
   nd_rng_seed(&r, 1, 7);
   nds_fit_paper_prior(nds_theta_true, 1.0, cfg.lower, &r, cfg.mu0, cfg.sigma0);
@@ -492,6 +522,17 @@ static void test_fit_recovers_sliding(void **state) {
   printf("plain CEM: mean %.4f std %.5f after one run\n", out.mean[0], out.std[0]);
   assert_true(out.std[NDS_TH_SLIDE] < 0.25 * cfg.sigma0[NDS_TH_SLIDE]);
   assert_true(fabs(out.mean[NDS_TH_SLIDE] - 1) > 0.1);
+  nds_fit_free(g);
+
+  /* Setpoint replay from the same start: on the way, not there. */
+  cfg.std_floor = 0.5;
+  cfg.replay.mode = NDS_REPLAY_SETPOINT;
+  g = nds_fit_create(&nm, &cfg, pool, err, sizeof(err));
+  assert_non_null(g);
+  for (int run = 0; run < 2; run++)
+    assert_int_equal(nds_fit_run(g, push, NPUSH, &out, err, sizeof(err)), 0);
+  printf("setpoint replay: mean %.4f after two runs\n", out.mean[0]);
+  assert_true(fabs(out.mean[NDS_TH_SLIDE] - 1) < 0.5 * fabs(cfg.mu0[NDS_TH_SLIDE] - 1));
   nds_fit_free(g);
   nds_fit_free(f);
   nds_model_free(&nm);
