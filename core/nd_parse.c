@@ -6,6 +6,7 @@
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
 int nd_parse_double(const char *s, const char *what, double lo, double hi, double *out,
                     char *err, int errlen) {
@@ -62,5 +63,25 @@ int nd_parse_u64(const char *s, const char *what, uint64_t *out, char *err, int 
     return -1;
   }
   *out = (uint64_t)v;
+  return 0;
+}
+
+int nd_parse_list(const char *s, const char *what, int n, double lo, double hi, double *out,
+                  char *err, int errlen) {
+  char tok[64];
+  const char *p = s ? s : "";
+  for (int i = 0; i < n; i++) {
+    const char *e = strchr(p, ',');
+    size_t len = e ? (size_t)(e - p) : strlen(p);
+    if ((e == NULL) != (i == n - 1) || len >= sizeof(tok)) {
+      snprintf(err, errlen, "%s: expected %d comma-separated numbers, got '%s'", what, n,
+               s ? s : "");
+      return -1;
+    }
+    memcpy(tok, p, len);
+    tok[len] = '\0';
+    if (nd_parse_double(tok, what, lo, hi, &out[i], err, errlen)) return -1;
+    p = e ? e + 1 : p + len;
+  }
   return 0;
 }

@@ -13,6 +13,11 @@ int nd_parse_double(const char *s, const char *what, double lo, double hi, doubl
 int nd_parse_int(const char *s, const char *what, long lo, long hi, int *out, char *err,
                  int errlen);
 
+/* Parse exactly n comma-separated finite doubles, each in [lo, hi], into out.
+ * Return 0, or -1 with a message naming what. */
+int nd_parse_list(const char *s, const char *what, int n, double lo, double hi, double *out,
+                  char *err, int errlen);
+
 /* Parse an unsigned 64-bit decimal integer. Return 0, or -1 with a message. */
 int nd_parse_u64(const char *s, const char *what, uint64_t *out, char *err, int errlen);
 

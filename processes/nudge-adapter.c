@@ -100,31 +100,6 @@ static void usage(FILE *f) {
           NDP_DEFAULT_URL);
 }
 
-/* Parse exactly 4 comma-separated numbers into theta. */
-static int parse_theta(const char *s, double theta[NDS_NTHETA], char *err, int errlen) {
-  static const char *what[NDS_NTHETA] = {"--theta sliding friction", "--theta torsional friction",
-                                         "--theta rolling friction", "--theta sphere mass"};
-  char buf[256];
-  if (strlen(s) >= sizeof(buf)) {
-    snprintf(err, errlen, "--theta: value too long");
-    return -1;
-  }
-  strcpy(buf, s);
-  char *p = buf;
-  for (int i = 0; i < NDS_NTHETA; i++) {
-    char *comma = strchr(p, ',');
-    if ((i < NDS_NTHETA - 1) != (comma != NULL)) {
-      snprintf(err, errlen, "--theta: expected 4 comma-separated numbers, got '%s'", s);
-      return -1;
-    }
-    if (comma) *comma = '\0';
-    if (nd_parse_double(p, what[i], 0.0, NDP_HISTORY_MAX_THETA, &theta[i], err, errlen))
-      return -1;
-    p = comma ? comma + 1 : p;
-  }
-  return nds_theta_check(theta, err, errlen);
-}
-
 static int parse_fit(const char *s, int fit[NDS_NTHETA], char *err, int errlen) {
   char buf[128];
   if (strlen(s) >= sizeof(buf)) {
@@ -201,8 +176,8 @@ static int parse_opts(int argc, char **argv, opts *o) {
     else if (!strcmp(a, "--buffer")) o->buffer = v;
     else if (!strcmp(a, "--history")) history = v;
     else if (!strcmp(a, "--fit")) rc = parse_fit(v, o->fit, err, sizeof(err));
-    else if (!strcmp(a, "--theta")) rc = parse_theta(v, o->theta, err, sizeof(err));
-    else if (!strcmp(a, "--prior-ref")) rc = parse_theta(v, o->ref, err, sizeof(err));
+    else if (!strcmp(a, "--theta")) rc = nds_theta_parse(v, a, o->theta, err, sizeof(err));
+    else if (!strcmp(a, "--prior-ref")) rc = nds_theta_parse(v, a, o->ref, err, sizeof(err));
     else if (!strcmp(a, "--prior-d")) rc = nd_parse_double(v, a, 0.01, 10.0, &o->D, err, sizeof(err));
     else if (!strcmp(a, "--threads")) rc = nd_parse_int(v, a, 1, 256, &o->threads, err, sizeof(err));
     else if (!strcmp(a, "--nice")) rc = nd_parse_int(v, a, 0, 19, &o->nice, err, sizeof(err));

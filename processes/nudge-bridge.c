@@ -365,26 +365,6 @@ static void usage(FILE *f) {
           NDP_DEFAULT_URL);
 }
 
-/* Parse exactly n comma-separated numbers in [lo, hi]. */
-static int parse_list(const char *s, const char *what, int n, double lo, double hi,
-                      double *out, char *err, int errlen) {
-  char tok[64];
-  const char *p = s;
-  for (int i = 0; i < n; i++) {
-    const char *e = strchr(p, ',');
-    size_t len = e ? (size_t)(e - p) : strlen(p);
-    if ((e == NULL) != (i == n - 1) || len >= sizeof(tok)) {
-      snprintf(err, errlen, "%s: expected %d comma-separated numbers, got '%s'", what, n, s);
-      return -1;
-    }
-    memcpy(tok, p, len);
-    tok[len] = '\0';
-    if (nd_parse_double(tok, what, lo, hi, &out[i], err, errlen)) return -1;
-    p = e ? e + 1 : p + len;
-  }
-  return 0;
-}
-
 /* Return 0, 1 for --help, or -1 with a message for a bad argument. */
 static int parse_args(int argc, char **argv, bridge_cfg *c, char *err, int errlen) {
   for (int i = 1; i < argc; i++) {
@@ -424,13 +404,12 @@ static int parse_args(int argc, char **argv, bridge_cfg *c, char *err, int errle
       rc = nd_parse_double(v, "--mocap-hz", 1.0, 10000.0, &c->mocap_hz, err, errlen);
     else if (!strcmp(a, "--cmd-timeout"))
       rc = nd_parse_double(v, "--cmd-timeout", 1e-3, 60.0, &c->cmd_timeout, err, errlen);
-    else if (!strcmp(a, "--theta")) {
-      rc = parse_list(v, "--theta", NDS_NTHETA, -1e6, 1e6, c->theta, err, errlen);
-      if (!rc) rc = nds_theta_check(c->theta, err, errlen);
-    } else if (!strcmp(a, "--object"))
-      rc = parse_list(v, "--object", 3, -NDP_MAX_POS, NDP_MAX_POS, c->obj, err, errlen);
+    else if (!strcmp(a, "--theta"))
+      rc = nds_theta_parse(v, a, c->theta, err, errlen);
+    else if (!strcmp(a, "--object"))
+      rc = nd_parse_list(v, "--object", 3, -NDP_MAX_POS, NDP_MAX_POS, c->obj, err, errlen);
     else if (!strcmp(a, "--ee"))
-      rc = parse_list(v, "--ee", 2, -NDP_MAX_POS, NDP_MAX_POS, c->ee, err, errlen);
+      rc = nd_parse_list(v, "--ee", 2, -NDP_MAX_POS, NDP_MAX_POS, c->ee, err, errlen);
     else if (!strcmp(a, "--model"))
       c->model_path = v;
     else if (!strcmp(a, "--seconds"))

@@ -71,30 +71,6 @@ static void usage(FILE *f) {
           NDP_DEFAULT_URL);
 }
 
-/* Parse "s,t,r,m" into theta. Return 0, or -1 with a message. */
-static int parse_theta(const char *s, double theta[NDS_NTHETA], char *err, int errlen) {
-  static const char *what[NDS_NTHETA] = {"--theta sliding friction", "--theta torsional friction",
-                                         "--theta rolling friction", "--theta sphere mass"};
-  char buf[256];
-  if (strlen(s) >= sizeof(buf)) {
-    snprintf(err, errlen, "--theta: value too long");
-    return -1;
-  }
-  strcpy(buf, s);
-  char *p = buf;
-  for (int i = 0; i < NDS_NTHETA; i++) {
-    char *comma = strchr(p, ',');
-    if ((i < NDS_NTHETA - 1) != (comma != NULL)) {
-      snprintf(err, errlen, "--theta: expected 4 comma-separated numbers, got '%s'", s);
-      return -1;
-    }
-    if (comma) *comma = '\0';
-    if (nd_parse_double(p, what[i], 0.0, 1e4, &theta[i], err, errlen)) return -1;
-    p = comma ? comma + 1 : p;
-  }
-  return nds_theta_check(theta, err, errlen);
-}
-
 /* Return 0, 1 for --help, or 2 after printing what is wrong. */
 static int parse_opts(int argc, char **argv, opts *o) {
   char err[256];
@@ -144,7 +120,7 @@ static int parse_opts(int argc, char **argv, opts *o) {
     else if (!strcmp(a, "--seed")) rc = nd_parse_u64(v, a, &o->seed, err, sizeof(err));
     else if (!strcmp(a, "--max-rate")) rc = nd_parse_double(v, a, 0.1, 1000, &o->max_rate, err, sizeof(err));
     else if (!strcmp(a, "--state-timeout")) rc = nd_parse_double(v, a, 1e-3, 10, &o->state_timeout, err, sizeof(err));
-    else rc = parse_theta(v, o->theta, err, sizeof(err));
+    else rc = nds_theta_parse(v, a, o->theta, err, sizeof(err));
     if (rc) {
       fprintf(stderr, PROG ": %s\n", err);
       usage(stderr);

@@ -624,30 +624,6 @@ static void usage(FILE *f) {
           "128+n when stopped by signal n (SIGINT: 130), after printing what ran.\n");
 }
 
-/* Parse "s,t,r,m" into theta. Return 0, or -1 with a message. */
-static int parse_theta(const char *s, double theta[NDS_NTHETA], char *err, int errlen) {
-  static const char *what[NDS_NTHETA] = {"--theta sliding friction", "--theta torsional friction",
-                                         "--theta rolling friction", "--theta sphere mass"};
-  char buf[256];
-  if (strlen(s) >= sizeof(buf)) {
-    snprintf(err, errlen, "--theta: value too long");
-    return -1;
-  }
-  strcpy(buf, s);
-  char *p = buf;
-  for (int i = 0; i < NDS_NTHETA; i++) {
-    char *comma = strchr(p, ',');
-    if ((i < NDS_NTHETA - 1) != (comma != NULL)) {
-      snprintf(err, errlen, "--theta: expected 4 comma-separated numbers, got '%s'", s);
-      return -1;
-    }
-    if (comma) *comma = '\0';
-    if (nd_parse_double(p, what[i], 0.0, 1e4, &theta[i], err, errlen)) return -1;
-    p = comma ? comma + 1 : p;
-  }
-  return nds_theta_check(theta, err, errlen);
-}
-
 /* Parse argv into c. 0 to run, 1 for --help, -1 with a message on a bad argument. */
 static int parse_args(int argc, char **argv, tasks_cfg *c, char *err, int errlen) {
   c->eps = 1e-2;
@@ -707,7 +683,7 @@ static int parse_args(int argc, char **argv, tasks_cfg *c, char *err, int errlen
     } else if (!strcmp(a, "--record-dt")) {
       rc = nd_parse_double(v, "--record-dt", 1e-5, 0.05, &c->record_dt, err, errlen);
     } else if (!strcmp(a, "--theta")) {
-      rc = parse_theta(v, c->theta, err, errlen);
+      rc = nds_theta_parse(v, a, c->theta, err, errlen);
     } else if (!strcmp(a, "--await-fit")) {
       rc = nd_parse_double(v, "--await-fit", 0.0, 3600.0, &c->await_fit, err, errlen);
     } else {

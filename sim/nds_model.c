@@ -1,6 +1,8 @@
 /* nds_model: the pushing scene's MJCF, loading it, and applying theta. */
 #include "nds_model.h"
 
+#include "nd_parse.h"
+
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -307,6 +309,12 @@ int nds_model_copy(nds_model *dst, const nds_model *src, char *err, int errlen) 
 void nds_model_free(nds_model *nm) {
   if (nm->m) mj_deleteModel(nm->m);
   nm->m = NULL;
+}
+
+int nds_theta_parse(const char *s, const char *what, double theta[NDS_NTHETA], char *err,
+                    int errlen) {
+  if (nd_parse_list(s, what, NDS_NTHETA, 0.0, 1e4, theta, err, errlen)) return -1;
+  return nds_theta_check(theta, err, errlen);
 }
 
 int nds_theta_apply(nds_model *nm, const double theta[NDS_NTHETA], char *err, int errlen) {

@@ -71,6 +71,11 @@ void nds_model_free(nds_model *nm);
 /* Check theta: finite, frictions >= 0, mass > 0. Return 0, or -1 naming the bad value. */
 int nds_theta_check(const double theta[NDS_NTHETA], char *err, int errlen);
 
+/* Parse "S,T,R,M" (option what, e.g. "--theta") into theta and check it. Return 0, or -1
+ * with a message. */
+int nds_theta_parse(const char *s, const char *what, double theta[NDS_NTHETA], char *err,
+                    int errlen);
+
 /* Apply theta to the model's contacts and sphere mass. Return 0, or -1 (model unchanged). */
 int nds_theta_apply(nds_model *nm, const double theta[NDS_NTHETA], char *err, int errlen);
 
