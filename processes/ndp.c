@@ -112,6 +112,20 @@ int ndp_status_tick(lcm_t *lcm, ndp_status *st, int force) {
   return 1;
 }
 
+void ndp_refused(ndp_ratelog *rl, const char *prog, const char *what, const char *why) {
+  const double now = ndp_mono();
+  rl->count++;
+  if (rl->count > NDP_RATELOG_FIRST && now < rl->next) return;
+  fprintf(stderr, "%s: refused %s: %s (%lld so far)\n", prog, what, why, (long long)rl->count);
+  if (rl->count >= NDP_RATELOG_FIRST) rl->next = now + NDP_RATELOG_EVERY;
+}
+
+int ndp_default_threads(void) {
+  long n = sysconf(_SC_NPROCESSORS_ONLN);
+  long t = n <= 4 ? n - 1 : n - 2;
+  return t < 1 ? 1 : (int)t;
+}
+
 void ndp_drain(lcm_t *lcm) {
   while (lcm_handle_timeout(lcm, 0) > 0) {
   }

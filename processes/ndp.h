@@ -75,6 +75,23 @@ void ndp_status_init(ndp_status *st, const char *name);
  * published, 0 if not due, -1 on a publish error. */
 int ndp_status_tick(lcm_t *lcm, ndp_status *st, int force);
 
+/* Rate-limited refusal messages: the first NDP_RATELOG_FIRST of one kind, then at most one
+ * every NDP_RATELOG_EVERY s, each with the running count, so a flood of bad input cannot
+ * flood stderr. Zero-initialise one per kind of refusal; count is every refusal seen. */
+#define NDP_RATELOG_FIRST 5
+#define NDP_RATELOG_EVERY 10.0
+typedef struct {
+  int64_t count;
+  double next;   /* ndp_mono() before which a line past the first few is suppressed */
+} ndp_ratelog;
+
+/* Count one refusal and print "<prog>: refused <what>: <why> (<count> so far)" if due. */
+void ndp_refused(ndp_ratelog *rl, const char *prog, const char *what, const char *why);
+
+/* Rollout workers that leave the 1 kHz processes a core: cores - 1 up to 4 cores,
+ * cores - 2 above, at least 1. */
+int ndp_default_threads(void);
+
 /* Drain every queued message without blocking (LCM's queues drop the newest when full). */
 void ndp_drain(lcm_t *lcm);
 

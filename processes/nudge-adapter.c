@@ -134,10 +134,8 @@ static int parse_fit(const char *s, int fit[NDS_NTHETA], char *err, int errlen) 
 /* Return 0, 1 for --help, or 2 after printing what is wrong. */
 static int parse_opts(int argc, char **argv, opts *o) {
   char err[256] = "";
-  long ncores = sysconf(_SC_NPROCESSORS_ONLN);
   memset(o, 0, sizeof(*o));
-  o->threads = ncores <= 4 ? (int)ncores - 1 : (int)ncores - 2;
-  if (o->threads < 1) o->threads = 1;
+  o->threads = ndp_default_threads();
   o->fit[NDS_TH_SLIDE] = o->fit[NDS_TH_TORSION] = o->fit[NDS_TH_ROLL] = 1;
   memcpy(o->theta, nds_theta_true, sizeof(o->theta));
   memcpy(o->ref, nds_theta_true, sizeof(o->ref));

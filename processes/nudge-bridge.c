@@ -293,8 +293,7 @@ static void *rt_main(void *arg) {
 typedef struct {
   bridge *b;
   ndp_status *status;
-  double last_log;
-  int64_t logged;
+  ndp_ratelog refused;
 } io_ctx;
 
 static void on_ee_cmd(const lcm_recv_buf_t *rbuf, const char *channel,
@@ -306,14 +305,7 @@ static void on_ee_cmd(const lcm_recv_buf_t *rbuf, const char *channel,
   char why[256];
   if (ndp_check_ee_cmd(msg, why, sizeof(why))) {
     io->status->rejected++;
-    /* The first few reasons, then one every 10 s: a misbehaving sender must not flood. */
-    double now = ndp_mono();
-    if (io->logged < 3 || now - io->last_log >= 10.0) {
-      fprintf(stderr, "%s: refused EE_CMD seq %lld (%lld refused so far): %s\n", PROG,
-              (long long)msg->seq, (long long)io->status->rejected, why);
-      io->last_log = now;
-      io->logged++;
-    }
+    ndp_refused(&io->refused, PROG, "EE_CMD", why);
     return;
   }
   cmd_post c;
@@ -571,7 +563,7 @@ int main(int argc, char **argv) {
   ndp_status_init(&st, PROG);
   rt_stats rs = {0};
   st.loop = &rs.loop;
-  io_ctx io = {.b = b, .status = &st, .last_log = 0, .logged = 0};
+  io_ctx io = {.b = b, .status = &st};
   if (!(sub = nudge_ee_cmd_t_subscribe(lcm, NDP_CH_EE_CMD, on_ee_cmd, &io))) {
     fprintf(stderr, "%s: cannot subscribe to %s\n", PROG, NDP_CH_EE_CMD);
     goto done;

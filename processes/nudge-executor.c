@@ -290,30 +290,12 @@ static void *rt_main(void *arg) {
 
 /* ---- the I/O thread ------------------------------------------------------------------ */
 
-/* Log the first few refusals of one kind, then one every 10 s with a count, so a flood
- * of bad input cannot flood the log. */
-typedef struct {
-  const char *what;
-  double next;         /* earliest time of the next line after the first five */
-} refusal_log;
-
-/* n_total: refusals of this kind so far, this one included. */
-static void log_refusal(refusal_log *rl, int64_t n_total, const char *why) {
-  const double now = ndp_mono();
-  if (n_total > 5 && now < rl->next) return;
-  fprintf(stderr, PROG ": refused %s: %s", rl->what, why);
-  if (n_total > 5) fprintf(stderr, " (%lld refused so far)", (long long)n_total);
-  fputc('\n', stderr);
-  if (n_total >= 5) rl->next = now + 10.0;
-}
-
 typedef struct {
   exec_io *io;
   double timeout;
   ndp_status st;
-  int64_t refused_state, refused_plan;
   int backlog_max;     /* most setpoints found waiting in the ring at once */
-  refusal_log log_state, log_plan, log_exec;
+  ndp_ratelog log_state, log_plan, log_exec;  /* refused inputs; plans nd_exec refused */
 } io_ctx;
 
 static void on_state(const lcm_recv_buf_t *rbuf, const char *ch,
@@ -325,7 +307,7 @@ static void on_state(const lcm_recv_buf_t *rbuf, const char *ch,
   c->st.received++;
   if (ndp_check_robot_state(msg, why, sizeof why)) {
     c->st.rejected++;
-    log_refusal(&c->log_state, ++c->refused_state, why);
+    ndp_refused(&c->log_state, PROG, "ROBOT_STATE", why);
     return;
   }
   state_in in;
@@ -343,7 +325,7 @@ static void on_plan(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_plan
   c->st.received++;
   if (ndp_check_plan(msg, why, sizeof why)) {
     c->st.rejected++;
-    log_refusal(&c->log_plan, ++c->refused_plan, why);
+    ndp_refused(&c->log_plan, PROG, "PLAN", why);
     return;
   }
   plan_in in;
@@ -500,7 +482,7 @@ static void note_report(io_ctx *c, const rt_report *r, rt_report *last) {
   if (r->refused != last->refused) {
     char why[200];
     snprintf(why, sizeof why, "plan %lld: %s", (long long)r->refused_id, r->refused_why);
-    log_refusal(&c->log_exec, r->refused, why);
+    ndp_refused(&c->log_exec, PROG, "plan", why);
   }
   *last = *r;
 }
@@ -539,9 +521,6 @@ int main(int argc, char **argv) {
   c.timeout = opt.timeout;
   ndp_status_init(&c.st, PROG);
   c.st.state = "waiting";
-  c.log_state.what = "ROBOT_STATE";
-  c.log_plan.what = "PLAN";
-  c.log_exec.what = "plan";
   nudge_robot_state_t_subscription_t *sub_state =
       nudge_robot_state_t_subscribe(lcm, NDP_CH_ROBOT_STATE, on_state, &c);
   nudge_plan_t_subscription_t *sub_plan = nudge_plan_t_subscribe(lcm, NDP_CH_PLAN, on_plan, &c);
@@ -616,7 +595,7 @@ int main(int argc, char **argv) {
       note_report(&c, &rep, &last);
       loop = rep.loop;
       c.st.state = rep.mode < 0 ? "waiting" : nd_exec_mode_name(rep.mode);
-      c.st.rejected = c.refused_state + c.refused_plan + rep.refused;
+      c.st.rejected = c.log_state.count + c.log_plan.count + rep.refused;
     }
     const uint64_t drops = atomic_load(&io.ring.dropped);
     if (drops != drops_seen) {
@@ -634,7 +613,7 @@ int main(int argc, char **argv) {
   if (nd_mailbox_take(&io.report, &v_rep, &rep, (int)sizeof rep) == (int)sizeof rep) {
     loop = rep.loop;
     c.st.state = rep.mode < 0 ? "waiting" : nd_exec_mode_name(rep.mode);
-    c.st.rejected = c.refused_state + c.refused_plan + rep.refused;
+    c.st.rejected = c.log_state.count + c.log_plan.count + rep.refused;
     last = rep;
   }
   ndp_status_tick(lcm, &c.st, 1);

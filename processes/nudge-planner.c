@@ -28,8 +28,6 @@
 #define VEL_MAX_GAP 0.1    /* s; beyond it the frames say nothing about the present motion */
 
 /* Rejection reasons on stderr: the first few, then one summary per interval. */
-#define REJECT_LOG_FIRST 5
-#define REJECT_LOG_EVERY 10.0  /* s */
 
 /* ---------------------------------------------------------------------------------- */
 /* Options: constant once parsed. */
@@ -74,10 +72,8 @@ static void usage(FILE *f) {
 /* Return 0, 1 for --help, or 2 after printing what is wrong. */
 static int parse_opts(int argc, char **argv, opts *o) {
   char err[256];
-  long ncores = sysconf(_SC_NPROCESSORS_ONLN);
   memset(o, 0, sizeof(*o));
-  o->threads = ncores <= 4 ? (int)ncores - 1 : (int)ncores - 2;
-  if (o->threads < 1) o->threads = 1;
+  o->threads = ndp_default_threads();
   o->pop = 50;
   o->iters = 2;
   /* 10 ms keeps one core at ~19 plans/s while pushing, twice the executor's 0.1 s plan
@@ -204,27 +200,12 @@ typedef struct {
 
   int64_t plan_id;
 
-  /* rejection log */
-  int reject_logged;
-  int64_t reject_unlogged;
-  double reject_next;
+  ndp_ratelog rejected;         /* rate-limited log of refused inputs */
 } proc;
 
 static void reject(proc *p, const char *channel, const char *why) {
   p->st.rejected++;
-  double now = ndp_mono();
-  if (p->reject_logged < REJECT_LOG_FIRST) {
-    p->reject_logged++;
-    fprintf(stderr, PROG ": rejected %s: %s\n", channel, why);
-    p->reject_next = now + REJECT_LOG_EVERY;
-  } else if (now >= p->reject_next) {
-    fprintf(stderr, PROG ": rejected %s: %s (%lld more since the last report)\n", channel, why,
-            (long long)p->reject_unlogged);
-    p->reject_unlogged = 0;
-    p->reject_next = now + REJECT_LOG_EVERY;
-  } else {
-    p->reject_unlogged++;
-  }
+  ndp_refused(&p->rejected, PROG, channel, why);
 }
 
 /* Object velocity in the free-joint qvel convention of nds_state: linear (world) in

@@ -107,8 +107,7 @@ typedef struct {
   int64_t frames;     /* valid frames received */
   int fresh;          /* a valid frame arrived since the runner last looked */
   ndp_status st;
-  int64_t refused_logged;
-  double log_next;
+  ndp_ratelog refused;
   recorder *rec;      /* NULL without --record */
 } tasks_io;
 
@@ -141,17 +140,10 @@ static void install_signals(void) {
   sigaction(SIGTERM, &sa, NULL);
 }
 
-/* Count a refused message; the first few reasons, then one every 10 s: a broken publisher
- * must not flood. */
+/* Count a refused message in status and log it, rate-limited. */
 static void refuse(tasks_io *io, const char *what, const char *why) {
   io->st.rejected++;
-  double now = ndp_mono();
-  if (io->refused_logged < 3 || now >= io->log_next) {
-    fprintf(stderr, PROG ": refused %s (%lld so far): %s\n", what, (long long)io->st.rejected,
-            why);
-    io->refused_logged++;
-    io->log_next = now + 10.0;
-  }
+  ndp_refused(&io->refused, PROG, what, why);
 }
 
 /* ---- recording ---- */
