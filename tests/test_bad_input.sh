@@ -111,8 +111,8 @@ pt_figure plans_after_injection "${nplans:-0}" count
 reached2=$(grep -c '^reached 1/1 goals' "$PT_WORK/tasks2.out")
 pt_check "after the injections a further task reached its goal or plans kept flowing (${nplans:-0} plans)" \
   test "${nplans:-0}" -ge 1 -a \( "$reached2" -eq 1 -o "${nplans:-0}" -ge 10 \)
-pt_check "EE_CMD after the injections: no gap over 20 ms, continuous" \
-  pt_lc ee-cmd "$LOG" --max-gap-ms 20 --from-utime "$t_first"
+pt_check "EE_CMD after the injections: loop alive (no gap over 0.5 s), continuous" \
+  pt_lc ee-cmd "$LOG" --max-gap-ms 500 --from-utime "$t_first"
 
 pt_check "no process died or was restarted (supervisor.log)" \
   bash -c "! grep -E 'exited|restarted' '$RUN/supervisor.log'"

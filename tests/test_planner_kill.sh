@@ -106,7 +106,7 @@ pt_restarts_are "$RUN" planner 1
 new=$(sed -n -E 's/.*restarted nudge-planner \(pid ([0-9]+)\).*/\1/p' "$RUN/supervisor.log" | tail -n 1)
 pt_check "the restarted planner (pid ${new:-none}) published heartbeats" \
   pt_lc status "$LOG" nudge-planner --pid "${new:-1}"
-pt_check "EE_CMD: no gap over 20 ms and continuous through the kill and the restart" \
-  pt_lc ee-cmd "$LOG" --max-gap-ms 20
+pt_check "EE_CMD: loop alive (no gap over 0.5 s) and continuous through the kill and the restart" \
+  pt_lc ee-cmd "$LOG" --max-gap-ms 500
 pt_none_left "$RUN"
 exit $((PT_FAILS > 0))
