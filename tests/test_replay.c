@@ -518,9 +518,10 @@ static void test_fit_recovers_sliding(void **state) {
 
   /* Plain CEM (no floor, no step_std) from the same start freezes on the way: its std
    * collapses within the first run, and the mean stops short of the truth. */
-  const double floor0 = cfg.std_floor;
+  const nds_fit_cfg dflt = cfg;
   cfg.std_floor = 0;
   cfg.step_std = 0;
+  cfg.rel_floor = 0;
   nds_fit *g = nds_fit_create(&nm, &cfg, pool, err, sizeof(err));
   assert_non_null(g);
   assert_int_equal(nds_fit_run(g, push, NPUSH, &out, err, sizeof(err)), 0);
@@ -530,8 +531,9 @@ static void test_fit_recovers_sliding(void **state) {
   nds_fit_free(g);
 
   /* Setpoint replay from the same start: on the way, not there. */
-  cfg.std_floor = floor0;
-  cfg.step_std = 1;
+  cfg.std_floor = dflt.std_floor;
+  cfg.step_std = dflt.step_std;
+  cfg.rel_floor = dflt.rel_floor;
   cfg.replay.mode = NDS_REPLAY_SETPOINT;
   g = nds_fit_create(&nm, &cfg, pool, err, sizeof(err));
   assert_non_null(g);
@@ -642,7 +644,8 @@ static void test_fit_bad_config(void **state) {
   BAD("std_floor", c->std_floor = -1);
   BAD("k1", c->k1 = NAN);
   BAD("k2", c->k2 = -1e-3);
-  BAD("step_std", c->step_std = 2);
+  BAD("step_std", c->step_std = -1);
+  BAD("rel_floor", c->rel_floor = 1);
   BAD("replay.window", c->replay.window = NAN);
   BAD("replay.window", c->replay.window = -0.1);
   BAD("fit[1]", c->fit[1] = 2);
