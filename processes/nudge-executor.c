@@ -2,7 +2,9 @@
  *
  * Follows the newest PLAN's first keypoint with a minimum-snap segment (core/nd_exec.h)
  * and publishes the setpoint (p, v, a) on EE_CMD every cycle. When the plan or the
- * robot state goes stale it brakes to rest and holds; a fresh plan resumes.
+ * robot state goes stale it brakes to rest and holds; a fresh plan resumes. Every
+ * setpoint names the plan it follows (plan_id, plan_utime), so a log shows that no
+ * setpoint moved on a plan older than the timeout.
  *
  * Two threads. The main thread owns LCM: it validates inputs and posts the newest of
  * each kind into a mailbox, publishes what the loop left in the ring, logs, and sends the
@@ -44,14 +46,15 @@
 
 /* Newest robot state: only what the loop needs, stamped with its local arrival time. */
 typedef struct {
-  double t_arrive;     /* ndp_mono() when the I/O thread received it */
+  double t_arrive;     /* ndp_mono() when it was sent (sent_mono) */
   double ee_pos[3];
 } state_in;
 
 /* Newest plan: its first keypoint and segment duration. */
 typedef struct {
-  double t_arrive;
+  double t_arrive;     /* as state_in's */
   int64_t plan_id;
+  int64_t utime;       /* plan_t.utime, passed on in EE_CMD.plan_utime */
   double key[4];       /* (x, y, vx, vy) */
   double T;
 } plan_in;
@@ -68,9 +71,11 @@ typedef struct {
   int64_t n_stale, n_resume;/* transitions to stale and back */
   int64_t cycles, sent;     /* loop cycles; setpoints committed to the ring */
   int64_t accepted, refused;/* plans taken / refused by nd_exec */
+  int64_t late;             /* plans already stale when the loop took them: dropped */
   int64_t refused_id;       /* plan_id of the last refused plan */
   char refused_why[160];    /* nd_exec's reason for it */
   int64_t plan_id;          /* plan being followed, -1 before the first */
+  int64_t plan_utime;       /* its utime, 0 before the first */
   int64_t missed;           /* deadlines skipped after overruns */
   ndp_loop_stats loop;      /* period error (us) and overruns */
 } rt_report;
@@ -182,6 +187,7 @@ static int exec_cycle(exec_state *s, double now, int64_t utime) {
         s->have_plan = 1;
         s->t_plan = s->plan.t_arrive;
         s->rep.plan_id = s->plan.plan_id;
+        s->rep.plan_utime = s->plan.utime;
         s->rep.accepted++;
       } else {
         /* A refused plan does not refresh the plan clock: a planner sending only
@@ -190,6 +196,8 @@ static int exec_cycle(exec_state *s, double now, int64_t utime) {
         s->rep.refused_id = s->plan.plan_id;
         dirty = 1;
       }
+    } else {
+      s->rep.late++;
     }
   }
 
@@ -212,6 +220,7 @@ static int exec_cycle(exec_state *s, double now, int64_t utime) {
   m.utime = utime;
   m.seq = s->seq++;
   m.plan_id = s->rep.plan_id;
+  m.plan_utime = s->rep.plan_utime;
   m.mode = (int8_t)mode;
   for (int ax = 0; ax < 2; ax++) {
     m.p[ax] = sp[ax][ND_P];
@@ -290,6 +299,18 @@ static void *rt_main(void *arg) {
 
 /* ---- the I/O thread ------------------------------------------------------------------ */
 
+/* The local monotonic time at which a message stamped utime (the sender's wall clock) was
+ * sent: now, less the time it spent on the way. Freshness counts from there, not from
+ * arrival: a process that was stopped for a while (a stall, SIGSTOP, a debugger) finds
+ * its socket full of old messages when it resumes, and by arrival time a plan made a
+ * second ago would look fresh and be followed. Needs the hosts' wall clocks in sync, as
+ * the plan's age in on_plan does; a sender's clock ahead of ours counts as no delay. */
+static double sent_mono(int64_t utime) {
+  const double now = ndp_mono();
+  const double delay = 1e-6 * (double)(ndp_utime() - utime);
+  return delay > 0.0 ? now - delay : now;
+}
+
 typedef struct {
   exec_io *io;
   double timeout;
@@ -311,7 +332,7 @@ static void on_state(const lcm_recv_buf_t *rbuf, const char *ch,
     return;
   }
   state_in in;
-  in.t_arrive = ndp_mono();
+  in.t_arrive = sent_mono(msg->utime);
   memcpy(in.ee_pos, msg->ee_pos, sizeof in.ee_pos);
   nd_mailbox_post(&c->io->state, &in, (int)sizeof(in));
 }
@@ -329,8 +350,9 @@ static void on_plan(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_plan
     return;
   }
   plan_in in;
-  in.t_arrive = ndp_mono();
+  in.t_arrive = sent_mono(msg->utime);
   in.plan_id = msg->plan_id;
+  in.utime = msg->utime;
   memcpy(in.key, msg->keypoints[0], sizeof in.key);
   /* The planner's rollouts reach keypoint 0 at state_utime + T. The plan arrives a planning
    * time later, so the segment is shortened by that age to keep the keypoint where the
@@ -384,7 +406,8 @@ static void usage(FILE *f) {
           "until the first ROBOT_STATE; brakes to rest and holds while PLAN or ROBOT_STATE\n"
           "is stale; a fresh plan resumes.\n\n"
           "  --rate HZ       loop rate (default 1000)\n"
-          "  --timeout S     inputs older than this are stale (default 0.1)\n"
+          "  --timeout S     inputs older than this are stale (default 0.1); age counts\n"
+          "                  from the message's utime, so hosts need synced clocks\n"
           "  --v-max M/S     speed limit (default %g)\n"
           "  --a-max M/S2    acceleration limit (default %g)\n"
           "  --j-max M/S3    jerk limit (default %g)\n"
@@ -620,11 +643,11 @@ int main(int argc, char **argv) {
   fprintf(stderr,
           PROG ": stopped after %lld cycles, %lld setpoints; period error p50 %d us, p99 %d "
                "us, max %d us; %lld overruns (%lld deadlines skipped); %llu ring drops; "
-               "max publish backlog %d; plans %lld taken, %lld refused\n",
+               "max publish backlog %d; plans %lld taken, %lld refused, %lld stale on arrival\n",
           (long long)last.cycles, (long long)last.sent, loop.p50_us, loop.p99_us,
           loop.max_us, (long long)loop.overruns, (long long)last.missed,
           (unsigned long long)drops_seen, c.backlog_max, (long long)last.accepted,
-          (long long)last.refused);
+          (long long)last.refused, (long long)last.late);
   close(io.bell);
   nudge_robot_state_t_unsubscribe(lcm, sub_state);
   nudge_plan_t_unsubscribe(lcm, sub_plan);
