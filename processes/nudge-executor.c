@@ -46,7 +46,7 @@
 
 /* Newest robot state: only what the loop needs, stamped with its local arrival time. */
 typedef struct {
-  double t_arrive;     /* ndp_mono() when it was sent (sent_mono) */
+  double t_arrive;     /* ndp_mono() when it was sent (ndp_sent_mono): ages count from there */
   double ee_pos[3];
 } state_in;
 
@@ -299,24 +299,13 @@ static void *rt_main(void *arg) {
 
 /* ---- the I/O thread ------------------------------------------------------------------ */
 
-/* The local monotonic time at which a message stamped utime (the sender's wall clock) was
- * sent: now, less the time it spent on the way. Freshness counts from there, not from
- * arrival: a process that was stopped for a while (a stall, SIGSTOP, a debugger) finds
- * its socket full of old messages when it resumes, and by arrival time a plan made a
- * second ago would look fresh and be followed. Needs the hosts' wall clocks in sync, as
- * the plan's age in on_plan does; a sender's clock ahead of ours counts as no delay. */
-static double sent_mono(int64_t utime) {
-  const double now = ndp_mono();
-  const double delay = 1e-6 * (double)(ndp_utime() - utime);
-  return delay > 0.0 ? now - delay : now;
-}
-
 typedef struct {
   exec_io *io;
   double timeout;
   ndp_status st;
   int backlog_max;     /* most setpoints found waiting in the ring at once */
   ndp_ratelog log_state, log_plan, log_exec;  /* refused inputs; plans nd_exec refused */
+  ndp_ratelog log_old;                        /* plans made from a state too old */
 } io_ctx;
 
 static void on_state(const lcm_recv_buf_t *rbuf, const char *ch,
@@ -332,7 +321,7 @@ static void on_state(const lcm_recv_buf_t *rbuf, const char *ch,
     return;
   }
   state_in in;
-  in.t_arrive = sent_mono(msg->utime);
+  in.t_arrive = ndp_sent_mono(msg->utime);
   memcpy(in.ee_pos, msg->ee_pos, sizeof in.ee_pos);
   nd_mailbox_post(&c->io->state, &in, (int)sizeof(in));
 }
@@ -350,7 +339,7 @@ static void on_plan(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_plan
     return;
   }
   plan_in in;
-  in.t_arrive = sent_mono(msg->utime);
+  in.t_arrive = ndp_sent_mono(msg->utime);
   in.plan_id = msg->plan_id;
   in.utime = msg->utime;
   memcpy(in.key, msg->keypoints[0], sizeof in.key);
@@ -361,6 +350,16 @@ static void on_plan(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_plan
    * for this (same host here); the clamp to T/2 bounds the harm of a skewed clock. */
   double age = 1e-6 * (double)(ndp_utime() - msg->state_utime);
   if (!(age > 0.0)) age = 0.0;
+  /* A plan whose first keypoint was due before it arrived was made from a state the robot
+   * has left (a planner stalled mid-plan, or one that planned on input it handled late):
+   * even shortened, following it would move on stale information. */
+  if (age > msg->T) {
+    snprintf(why, sizeof why,
+             "plan %lld started from a state %.0f ms old, older than its segment (%.0f ms)",
+             (long long)msg->plan_id, 1e3 * age, 1e3 * msg->T);
+    ndp_refused(&c->log_old, PROG, "PLAN", why);
+    return;
+  }
   if (age > 0.5 * msg->T) age = 0.5 * msg->T;
   in.T = msg->T - age;
   nd_mailbox_post(&c->io->plan, &in, (int)sizeof(in));
@@ -618,7 +617,7 @@ int main(int argc, char **argv) {
       note_report(&c, &rep, &last);
       loop = rep.loop;
       c.st.state = rep.mode < 0 ? "waiting" : nd_exec_mode_name(rep.mode);
-      c.st.rejected = c.log_state.count + c.log_plan.count + rep.refused;
+      c.st.rejected = c.log_state.count + c.log_plan.count + c.log_old.count + rep.refused;
     }
     const uint64_t drops = atomic_load(&io.ring.dropped);
     if (drops != drops_seen) {
@@ -636,18 +635,20 @@ int main(int argc, char **argv) {
   if (nd_mailbox_take(&io.report, &v_rep, &rep, (int)sizeof rep) == (int)sizeof rep) {
     loop = rep.loop;
     c.st.state = rep.mode < 0 ? "waiting" : nd_exec_mode_name(rep.mode);
-    c.st.rejected = c.log_state.count + c.log_plan.count + rep.refused;
+    c.st.rejected = c.log_state.count + c.log_plan.count + c.log_old.count + rep.refused;
     last = rep;
   }
   ndp_status_tick(lcm, &c.st, 1);
   fprintf(stderr,
           PROG ": stopped after %lld cycles, %lld setpoints; period error p50 %d us, p99 %d "
                "us, max %d us; %lld overruns (%lld deadlines skipped); %llu ring drops; "
-               "max publish backlog %d; plans %lld taken, %lld refused, %lld stale on arrival\n",
+               "max publish backlog %d; plans %lld taken, %lld refused, %lld stale on arrival, "
+               "%lld from an outdated state\n",
           (long long)last.cycles, (long long)last.sent, loop.p50_us, loop.p99_us,
           loop.max_us, (long long)loop.overruns, (long long)last.missed,
           (unsigned long long)drops_seen, c.backlog_max, (long long)last.accepted,
-          (long long)last.refused, (long long)last.late);
+          (long long)last.refused, (long long)last.late,
+          (long long)c.log_old.count);
   close(io.bell);
   nudge_robot_state_t_unsubscribe(lcm, sub_state);
   nudge_plan_t_unsubscribe(lcm, sub_plan);
