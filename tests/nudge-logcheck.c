@@ -522,6 +522,7 @@ static int cmd_live(const lc_opts *o) {
 
 typedef struct {
   int64_t utime, state_utime;
+  double T;
 } plan_ref;
 
 typedef struct {
@@ -548,6 +549,7 @@ static void plans_visit(const lcm_eventlog_event_t *ev, void *user) {
   }
   s->p[s->n].utime = m.utime;
   s->p[s->n].state_utime = m.state_utime;
+  s->p[s->n].T = m.T;
   s->n++;
 }
 
@@ -559,7 +561,7 @@ static int cmp_plan(const void *a, const void *b) {
 typedef struct {
   const lc_opts *o;
   const plan_set *plans;
-  int64_t tracking, stale, no_plan, plans_used, unmatched, late_state;
+  int64_t tracking, stale, no_plan, plans_used, unmatched, stale_state;
   int64_t last_ref;              /* plan_utime of the previous tracking setpoint */
   const plan_ref *ref;           /* its PLAN in the log, NULL if not there */
   double age_max_ms, state_age_max_ms;
@@ -585,7 +587,7 @@ static void stale_visit(const lcm_eventlog_event_t *ev, void *user) {
   if (m.plan_utime != a->last_ref) {
     a->last_ref = m.plan_utime;
     a->plans_used++;
-    const plan_ref key = {m.plan_utime, 0};
+    const plan_ref key = {m.plan_utime, 0, 0.0};
     a->ref = bsearch(&key, a->plans->p, a->plans->n, sizeof key, cmp_plan);
     if (!a->ref) a->unmatched++;
   }
@@ -596,8 +598,12 @@ static void stale_visit(const lcm_eventlog_event_t *ev, void *user) {
     if (!a->first_stale_utime) a->first_stale_utime = m.utime;
   }
   if (a->ref) {
+    /* The executor refuses a plan whose state is older than its segment T on arrival and
+     * follows it for the timeout at most: older than that, it moved on a state it had
+     * left (a planner that stalled mid-plan, or planned on input it handled late). */
     const double st_ms = 1e-3 * (double)(m.utime - a->ref->state_utime);
     if (st_ms > a->state_age_max_ms) a->state_age_max_ms = st_ms;
+    if (st_ms > 1e3 * (a->ref->T + a->o->timeout) + a->o->slack_ms) a->stale_state++;
   }
 }
 
@@ -625,10 +631,15 @@ static int cmd_stale_cmds(const lc_opts *o) {
   printf("plan_age_max %.3f ms\n", a.age_max_ms);
   printf("plan_state_age_max %.3f ms\n", a.state_age_max_ms);
   printf("stale_commands %lld count\n", (long long)a.stale);
+  printf("stale_state_commands %lld count\n", (long long)a.stale_state);
   if (a.stale) printf("first_stale_utime %lld us\n", (long long)a.first_stale_utime);
   if (a.stale)
     fail("%lld tracking setpoints on a plan older than %g s + %g ms (oldest %.1f ms)",
          (long long)a.stale, o->timeout, o->slack_ms, a.age_max_ms);
+  if (a.stale_state)
+    fail("%lld tracking setpoints on a plan made from a state older than its T + %g s + "
+         "%g ms (oldest %.1f ms)", (long long)a.stale_state, o->timeout, o->slack_ms,
+         a.state_age_max_ms);
   return 0;
 }
 
@@ -937,9 +948,9 @@ static void usage(FILE *f) {
           "  live LOG         plans so far, newest setpoint's speed and mode\n"
           "      --min-plans N, --min-speed S (and tracking)\n"
           "  stale-cmds LOG --timeout S   every TRACKING setpoint must follow a plan at most\n"
-          "                   S (+ slack) old (EE_CMD.utime - plan_utime); fails if one does\n"
-          "                   not, or tracks with no plan. Also: its plans found in the log,\n"
-          "                   the oldest plan and plan state behind a setpoint\n"
+          "                   S (+ slack) old (EE_CMD.utime - plan_utime), made from a state\n"
+          "                   at most the plan's T + S (+ slack) old (if the PLAN is in the\n"
+          "                   log); fails if one does not, or tracks with no plan\n"
           "      --slack-ms M       allowance on S (default 2: the loop's period and clocks)\n"
           "  first-beats LOG  'first_beat.NAME.PID UTIME us' for every process instance\n"
           "  buffer FILE      records of a replay buffer (core reader): count, corrupt, torn\n"

@@ -23,7 +23,8 @@
 #   2. the adapter's parameter history reads back entry by entry: no corrupt entry,
 #      versions +1 each, fitted on this buffer and never on more rollouts than it holds;
 #   3. no EE_CMD setpoint in mode TRACKING follows a plan older than the executor's plan
-#      timeout (EE_CMD.plan_utime; nudge-logcheck stale-cmds);
+#      timeout (EE_CMD.plan_utime), nor a plan made from a state older than the plan's
+#      segment T plus that timeout (nudge-logcheck stale-cmds);
 #   4. every killed process was restarted, its new instance's first heartbeat on STATUS
 #      within 2 s of the kill (the runner's restart is the test's, reported apart), and
 #      no process exited that was not killed;
@@ -230,7 +231,7 @@ pt_check "records were committed during the soak (${committed:-0})" test "${comm
 # Tasks a fault spoiled are not recorded, by design (the bridge restarted, the runner
 # stalled and lost its input, ...); a runner that could not record the first task after
 # its start was a bug the soak found.
-not_rec=$(cat "$PT_WORK"/tasks-*.err | grep -c ': not recorded: ')
+not_rec=$(cat "$PT_WORK"/tasks-*.err | grep -c '^nudge-tasks: task [0-9]* not recorded: ')
 no_start=$(cat "$PT_WORK"/tasks-*.err | grep -c 'not recorded: no ROBOT_STATE received before')
 pt_figure tasks_not_recorded "$not_rec" count
 pt_check "every runner had a start state for its first task ($no_start without)" test "$no_start" -eq 0
@@ -244,9 +245,10 @@ pt_check "no corrupt history tail cut off by a restarted adapter" \
   bash -c "! grep -q 'cut off a corrupt tail' '$RUN/adapter.log'"
 
 # --- 3. stale plans -------------------------------------------------------------------
-pt_check "EE_CMD: no TRACKING setpoint on a plan older than $TIMEOUT_S s" \
+pt_check "EE_CMD: no TRACKING setpoint on a plan older than $TIMEOUT_S s or made from a state older than its T + $TIMEOUT_S s" \
   pt_lc stale-cmds "$LOG" --timeout "$TIMEOUT_S"
 pt_val stale stale-cmds "$LOG" --timeout "$TIMEOUT_S" stale_commands
+pt_val stale_state stale-cmds "$LOG" --timeout "$TIMEOUT_S" stale_state_commands
 pt_val tracking stale-cmds "$LOG" --timeout "$TIMEOUT_S" tracking_commands
 pt_check "the executor tracked plans during the soak (${tracking:-0} setpoints)" \
   test "${tracking:-0}" -ge 1000
@@ -331,6 +333,7 @@ pt_figure records_in_file "${in_file:-0}" count
 pt_figure records_corrupt "$corrupt" count
 pt_figure records_missing "${missing:-0}" count
 pt_figure stale_commands "${stale:-0}" count
+pt_figure stale_state_commands "${stale_state:-0}" count
 pt_figure restart_s_max "$rmax" s
 pt_figure restart_s_median "$rmed" s
 pt_figure restarts_measured "${#sup_times[@]}" count
