@@ -79,8 +79,9 @@ TARGETS=("${SUPERVISED[@]}" tasks)
 pt_say "seed $seed ($want faults wanted, at most $duration s of injection)"
 pt_figure seed "$seed" -
 
-# The default chain of five pushes, over and over: a runner never runs out of goals.
-for ((i = 0; i < 60; i++)); do
+# The default chain of five pushes, over and over (1000 goals, nudge-tasks' most: well
+# over an hour of tasks).
+for ((i = 0; i < 200; i++)); do
   printf '0.15 0 0\n0.25 0.10 0.4\n0.25 0.25 0.8\n0.10 0.30 0.8\n0 0.20 0.3\n'
 done >"$PT_WORK/goals.txt"
 
@@ -136,12 +137,19 @@ for p in "${TARGETS[@]}"; do last_fault[$p]=0; kills_of[$p]=0; stops_of[$p]=0; d
 KILLS=()        # "name old_pid t_kill_us"
 n_faults=0 n_kills=0 n_stops=0 tasks_self_exits=0
 
-# The runner exits by itself only on a failure (it has 300 goals): restart it, count it.
+# A runner that has run all its goals exits 0 and the next one goes on; any other exit
+# the test did not cause is a failure (counted), and the runner is restarted.
 check_tasks() {
+  local st
   if [[ -n $tasks ]] && ! kill -0 "$tasks" 2>/dev/null; then
     wait "$tasks"
-    pt_say "nudge-tasks (pid $tasks) exited by itself (status $?): restarting it"
-    tasks_self_exits=$((tasks_self_exits + 1))
+    st=$?
+    if ((st == 0)); then
+      pt_say "nudge-tasks (pid $tasks) ran all its goals: starting another"
+    else
+      pt_say "nudge-tasks (pid $tasks) exited by itself (status $st): restarting it"
+      tasks_self_exits=$((tasks_self_exits + 1))
+    fi
     start_tasks
   fi
 }
