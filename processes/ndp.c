@@ -59,6 +59,12 @@ double ndp_mono(void) {
   return ts.tv_sec + 1e-9 * ts.tv_nsec;
 }
 
+double ndp_sent_mono(int64_t utime) {
+  const double now = ndp_mono();
+  const double delay = 1e-6 * (double)(ndp_utime() - utime);
+  return delay > 0.0 ? now - delay : now;
+}
+
 static const char *mj_prog = "nudge";
 
 static void on_mj_error(const char *msg) {

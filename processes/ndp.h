@@ -42,6 +42,13 @@ int64_t ndp_utime(void);
 /* Monotonic time in seconds (loops, timeouts). */
 double ndp_mono(void);
 
+/* The ndp_mono() time at which a message stamped utime (its sender's wall clock) was sent:
+ * now less its time on the way. Input freshness counts from here, not from handling: a
+ * process resuming from a stall (SIGSTOP, a debugger, starvation) handles what queued up
+ * meanwhile, and by handling time a state or plan a second old would look new. Needs the
+ * hosts' wall clocks in sync; a sender's clock ahead of ours counts as no delay. */
+double ndp_sent_mono(int64_t utime);
+
 /* Route MuJoCo errors to stderr with the program name and exit(1) (MuJoCo's handler
  * must not return), and keep MuJoCo warnings off stdout and out of MUJOCO_LOG.TXT:
  * callers detect instabilities through mjData's warning counters. */

@@ -197,7 +197,9 @@ static void inject_robot_state(inj *j) {
 }
 
 static void inject_ee_cmd(inj *j) {
-  const nudge_ee_cmd_t ok = {wall_us(), 1, 1, 0, {-0.1, 0, 0.05}, {0, 0, 0}, {0, 0, 0}};
+  const int64_t now = wall_us();
+  const nudge_ee_cmd_t ok = {.utime = now, .seq = 1, .plan_id = 1, .plan_utime = now - 1000,
+                             .mode = 0, .p = {-0.1, 0, 0.05}};
   nudge_ee_cmd_t m;
 #define CMD_BAD(stmt)                                                   \
   do {                                                                  \
@@ -215,6 +217,7 @@ static void inject_ee_cmd(inj *j) {
   CMD_BAD(m.a[1] = 1e9);
   CMD_BAD(m.mode = 7);
   CMD_BAD(m.mode = -1);
+  CMD_BAD(m.plan_utime = -1);
 #undef CMD_BAD
   if (j->o->garbage) {
     m = ok;

@@ -4,7 +4,8 @@
 # takes the build directory as $1, and calls pt_init first. Everything it starts goes
 # through pt_spawn, so the EXIT trap can stop it; every wait has a deadline, so a test
 # ends by itself. Assertions print "ok - ..." or "FAIL - ..." and the test exits 1 if any
-# failed; figures are printed as 'name value unit' lines.
+# failed; figures are printed as 'name value unit' lines. PT_KEEP=1 keeps the work
+# directory (logs, recordings) after the test.
 
 PT_NAME=${PT_NAME:-process-test}
 PT_FAILS=0
@@ -244,7 +245,11 @@ pt_cleanup() {
   if ((rc != 0 || PT_FAILS > 0)); then
     pt_dump_logs "$PT_WORK"/*/*.log "$PT_WORK"/*.out "$PT_WORK"/*.err
   fi
-  [[ -n ${PT_WORK:-} && -d $PT_WORK ]] && rm -rf -- "$PT_WORK"
+  if [[ -n ${PT_KEEP:-} ]]; then
+    pt_say "kept the work directory $PT_WORK (PT_KEEP)"
+  else
+    [[ -n ${PT_WORK:-} && -d $PT_WORK ]] && rm -rf -- "$PT_WORK"
+  fi
   if ((rc == 0 && PT_FAILS > 0)); then rc=1; fi
   if ((rc == 0)); then pt_say "PASSED"; elif ((rc != 77)); then pt_say "FAILED ($PT_FAILS failed checks, status $rc)"; fi
   exit $rc
