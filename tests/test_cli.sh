@@ -151,6 +151,7 @@ bad nudge-bridge "--lcm-url needs a value" --lcm-url
 bad nudge-bridge "--model needs a value" --model
 bad nudge-bridge "unknown|--threads" --threads 2
 bad nudge-bridge "--mocap-hz 2000 exceeds|1000" --mocap-hz 2000
+bad nudge-bridge "the sphere at --ee 0,0|overlaps the object" --ee 0,0
 
 common_cases nudge-executor
 num_cases nudge-executor --rate 0.5
@@ -260,6 +261,23 @@ bad nudge-bridge "cannot use --model|$W/noee.xml|no body named \"ee\"" --model "
 mkdir "$W/dir.xml"
 bad nudge-bridge "--model|$W/dir.xml" --model "$W/dir.xml"
 rmdir "$W/dir.xml"
+# A usable scene, at a timestep no real-time world can step; the same at 1 ms passes every
+# check and fails only at LCM (status 1): the refusals above are the files', not the test's.
+scene() { # TIMESTEP
+  printf '<mujoco><option timestep="%s"/><worldbody>
+  <body name="object" pos="0 0 0.025"><freejoint/><geom type="box" size=".05 .03 .025" mass=".5"/></body>
+  <body name="ee" pos="-0.1 0 0.025"><joint name="ee_x" type="slide" axis="1 0 0"/>
+    <joint name="ee_y" type="slide" axis="0 1 0"/><geom type="sphere" size=".025" mass="1"/></body>
+</worldbody></mujoco>\n' "$1"
+}
+scene 0.00001 >"$W/fast.xml"
+bad nudge-bridge "--model $W/fast.xml: timestep 1e-05 s is outside|give --rate" --model "$W/fast.xml"
+scene 0.001 >"$W/ok.xml"
+NCASES=$((NCASES + 1))
+timeout 20 "$BIN/nudge-bridge" --model "$W/ok.xml" </dev/null >"$W/out" 2>"$W/err"
+rc=$?
+pt_check "a usable --model passes its checks and fails only at LCM (status $rc)" \
+  test "$rc" -eq 1 -a -n "$(grep -F "cannot open LCM on '$LCM_DEFAULT_URL'" "$W/err")"
 
 bad nudge-tasks "cannot open $W/none.txt|No such file" --goals "$W/none.txt"
 printf '0.1 0 0\n0.2 x 0\n' >"$W/g1.txt"

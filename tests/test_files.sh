@@ -113,6 +113,25 @@ HIST1=$W/b3.nbuf.history
 pt_check "it created its history $HIST1" test -s "$HIST1"
 cp "$HIST1" "$W/h1.keep"
 
+# The buffer replaced under the adapter (a new run's file moved into place): it drops the
+# old rollouts and fits the new file's.
+cp "$BUF3" "$W/r.nbuf"
+adapter repl --buffer "$W/r.nbuf"
+said "$W/repl.out" "refit version 1: 3 rollout(s)" 60 || pt_fail "replaced buffer: no first fit"
+cp "$VAL" "$W/r.new"
+mv "$W/r.new" "$W/r.nbuf"
+said "$W/repl.err" "$W/r.nbuf was replaced: dropping its 3 rollout(s)" 10 || pt_fail "replaced buffer: not noticed"
+said "$W/repl.out" "refit version 2: 1 rollout(s)" 60 || pt_fail "replaced buffer: the new file was not fitted"
+# A second adapter on the same history: refused while the first holds it.
+APID1=$APID
+adapter locked --buffer "$W/r.nbuf"
+exits_within 20
+pt_check "a second adapter on a history in use: exit 1 (got $PT_RC), says why" \
+  test "$PT_RC" = 1 -a -n "$(grep -F "$W/r.nbuf.history: locked by another writer (pid $APID1)" "$W/locked.err" | grep -F 'another nudge-adapter')"
+APID=$APID1
+stop_adapter
+pt_check "replaced buffer: exit 0 on SIGINT (got $PT_RC)" test "$PT_RC" -eq 0
+
 adapter missing --buffer "$W/none.nrb"
 said "$W/missing.err" "waiting for $W/none.nrb to appear" 10 || pt_fail "missing buffer: no 'waiting for' line"
 pt_check "missing buffer: the adapter keeps running" kill -0 "$APID"
