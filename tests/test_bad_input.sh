@@ -7,16 +7,16 @@
 # With `nudge-up run` up and a task runner pushing the default chain's first two goals, then
 # a third that cannot be reached (tiny eps) to stay alive through every burst, recording
 # them (--record, into a file of its own: the recorder reads ROBOT_STATE, EE_CMD and PARAMS
-# too), nudge-inject sends on one channel at a time (MOCAP, ROBOT_STATE, EE_CMD, PLAN, TASK,
-# PARAMS, EPISODE, then STATUS with nudge-status listening): 'bad' messages that decode
-# but carry NaN, inf or out-of-range values, and garbage that does not decode. For each
-# channel, every process subscribed to it must count each bad message in its STATUS
+# too), nudge-inject sends on one channel at a time (MOCAP, ROBOT_STATE, EE_CMD, PARAMS,
+# PLAN, TASK, EPISODE, then STATUS with nudge-status listening; heartbeats whose name
+# carries terminal escapes or is over-long must not reach its output): 'bad' messages that
+# decode but carry NaN, inf or out-of-range values, and garbage that does not decode. For
+# each channel, every process subscribed to it must count each bad message in its STATUS
 # `rejected` (heartbeat before vs first heartbeat after the burst). Afterwards: no process
 # died or was restarted (supervisor.log, pids), the task runner, running through the
-# injections, finished with at least one of its two goals reached (see test_system for why
-# one), and a further task gets plans and reaches
-# its goal (or at least keeps getting plans) with smooth setpoints, and the recorder recorded
-# all three tasks.
+# injections, finished with at least one goal reached (see test_system for why one) and
+# recorded all three tasks, and a further task gets plans and reaches its goal (or at least
+# keeps getting plans) with smooth setpoints.
 set -u
 PT_NAME=test_bad_input
 . "$(dirname "${BASH_SOURCE[0]}")/process-lib.sh"
@@ -92,6 +92,8 @@ if pt_wait_pid "$st" 10; then
   pt_check "nudge-status survived STATUS garbage (exit $PT_RC)" test "$PT_RC" -eq 0
   n=$(grep -c '^nudge-' "$PT_WORK/status.out")
   pt_check "nudge-status printed heartbeats after the garbage ($n lines)" test "$n" -ge 3
+  pt_check_not "nudge-status printed no terminal control sequence nor the over-long name" \
+    grep -qE $'\x1b|hijacked|nnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnn' "$PT_WORK/status.out"
 else
   pt_fail "nudge-status --timeout 3 did not exit"
 fi
