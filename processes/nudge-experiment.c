@@ -204,9 +204,9 @@ static int parse_args(int argc, char **argv, opts *o) {
     if (!strcmp(a, "--quick")) { o->quick = 1; continue; }
     if (!strcmp(a, "--force")) { o->force = 1; continue; }
     if (!strcmp(a, "--landscape")) { o->landscape = 1; continue; }
-    static const char *const with_value[] = {"--out",  "--runs",       "--episodes", "--seed",
-                                              "--threads", "--pop",     "--iters",    "--tau",
-                                              "--eval-tasks", "--plan-dt", "--d",     "--replay"};
+    static const char *const with_value[] = {
+        "--out", "--runs", "--episodes", "--seed", "--threads", "--pop",
+        "--iters", "--tau", "--eval-tasks", "--plan-dt", "--d", "--replay"};
     int known = 0;
     for (size_t k = 0; k < sizeof(with_value) / sizeof(with_value[0]); k++)
       known |= !strcmp(a, with_value[k]);
@@ -538,7 +538,7 @@ static int run_gnuplot(const char *dir) {
   fflush(NULL);  /* the child must not flush our buffered output a second time */
   const pid_t pid = fork();
   if (pid < 0) return -1;
-  if (pid == 0) {  /* only async-signal-safe calls: the pool's threads are not copied */
+  if (pid == 0) {  /* only chdir and exec: locks the pool's threads held are not ours */
     if (chdir(dir) == 0) execlp("gnuplot", "gnuplot", "plots.gp", (char *)NULL);
     _exit(127);
   }
