@@ -3,6 +3,9 @@
 # then runs what you asked for. Safe to run again: it only installs what is absent and
 # only rebuilds what changed.
 set -euo pipefail
+# Whatever the caller's umask, nothing built here (the programs in build/bin among them)
+# or run from here may be world-writable.
+umask "$(printf '%04o' $((8#$(umask) | 8#002)))"
 
 usage() {
   cat <<'USAGE'

@@ -205,6 +205,10 @@ static int parse_opts(int argc, char **argv, opts *o) {
     snprintf(err, sizeof(err), "--buffer FILE is required");
     rc = -1;
   }
+  if (!rc && history && !*history) {
+    snprintf(err, sizeof(err), "--history: empty file name");
+    rc = -1;
+  }
   if (!rc) {
     int n = history ? snprintf(o->history, sizeof(o->history), "%s", history)
                     : snprintf(o->history, sizeof(o->history), "%s.history", o->buffer);

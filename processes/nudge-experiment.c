@@ -20,6 +20,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -211,8 +212,14 @@ static int parse_args(int argc, char **argv, opts *o) {
     if (!strcmp(a, "--quick")) { o->quick = 1; continue; }
     if (!strcmp(a, "--force")) { o->force = 1; continue; }
     if (!strcmp(a, "--landscape")) { o->landscape = 1; continue; }
-    if (strncmp(a, "--", 2) || i + 1 >= argc) {
-      fprintf(stderr, PROG ": unknown option or missing value: %s\n", a);
+    static const char *const with_value[] = {
+        "--out", "--runs", "--episodes", "--seed", "--threads", "--pop",
+        "--iters", "--tau", "--eval-tasks", "--plan-dt", "--d", "--replay"};
+    int known = 0;
+    for (size_t k = 0; k < sizeof(with_value) / sizeof(with_value[0]); k++)
+      known |= !strcmp(a, with_value[k]);
+    if (!known || i + 1 >= argc) {
+      fprintf(stderr, known ? PROG ": %s needs a value\n" : PROG ": unknown option: %s\n", a);
       usage(stderr);
       return 2;
     }
@@ -533,6 +540,23 @@ static int write_summary(const opts *o, ep_row *rows, const int *nrun, char *err
   return 0;
 }
 
+/* Run gnuplot plots.gp in dir, without a shell: the directory name reaches chdir(2) as it
+ * is, so no character of --out can act as shell syntax. Return gnuplot's exit status (127:
+ * it could not be started, 128 + N: killed by signal N), or -1 if fork failed. */
+static int run_gnuplot(const char *dir) {
+  fflush(NULL);  /* the child must not flush our buffered output a second time */
+  const pid_t pid = fork();
+  if (pid < 0) return -1;
+  if (pid == 0) {  /* only chdir and exec: locks the pool's threads held are not ours */
+    if (chdir(dir) == 0) execlp("gnuplot", "gnuplot", "plots.gp", (char *)NULL);
+    _exit(127);
+  }
+  int st;
+  while (waitpid(pid, &st, 0) < 0)
+    if (errno != EINTR) return -1;
+  return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
+}
+
 /* The figures: gnuplot reads the per-D data files. Column of metric m's mean in them: 2 +
  * 3 m (then min, max). Returns 0, or -1 if gnuplot failed or is missing (a warning). */
 static int write_plots(const opts *o, const int *nrun, char *err, int errlen) {
@@ -588,23 +612,7 @@ static int write_plots(const opts *o, const int *nrun, char *err, int errlen) {
     fputs("unset multiplot\n", f);
   }
   fclose(f);
-  char cmd[2600];
-  /* Run in the directory so the script's relative names work; quote the path for sh. */
-  char q[1300];
-  size_t j = 0;
-  q[j++] = '\'';
-  for (const char *p = o->out; *p && j < sizeof(q) - 6; p++) {
-    if (*p == '\'') {
-      memcpy(q + j, "'\\''", 4);
-      j += 4;
-    } else {
-      q[j++] = *p;
-    }
-  }
-  q[j++] = '\'';
-  q[j] = 0;
-  snprintf(cmd, sizeof(cmd), "cd %s && gnuplot plots.gp 2>&1", q);
-  int rc = system(cmd);
+  const int rc = run_gnuplot(o->out);
   if (rc != 0) {
     snprintf(err, errlen, "gnuplot failed or is missing (exit %d); the data and plots.gp are "
              "in %.300s", rc, o->out);
@@ -1141,6 +1149,9 @@ int main(int argc, char **argv) {
   opts o;
   int rc = parse_args(argc, argv, &o);
   if (rc) return rc == 1 ? 0 : rc;
+  /* The results (CSVs, gnuplot's figures, the buffers) must not be world-writable, even
+   * under umask 0. */
+  nd_rfile_umask_no_world_write();
   char err[512];
   if (mkdir_p(o.out, err, sizeof(err))) {
     fprintf(stderr, PROG ": %s\n", err);

@@ -677,6 +677,10 @@ static int parse_args(int argc, char **argv, tasks_cfg *c, char *err, int errlen
       rc = nd_parse_double(v, "--settle", 0.0, 3600.0, &c->settle, err, errlen);
     } else if (!strcmp(a, "--record")) {
       c->record = v;
+      if (!*v) {
+        snprintf(err, errlen, "--record: empty file name");
+        rc = -1;
+      }
     } else if (!strcmp(a, "--record-dt")) {
       rc = nd_parse_double(v, "--record-dt", 1e-5, 0.05, &c->record_dt, err, errlen);
     } else if (!strcmp(a, "--theta")) {

@@ -360,6 +360,19 @@ static void inject_status(inj *j) {
     const int len = nudge_status_t_encode(j->buf, 0, MAX_MSG, &m);
     send_bad_strings(j, len, 16, (int)sizeof name);
     send_bad_strings(j, len, 16 + 4 + (int)sizeof name + 4, (int)sizeof state);
+    /* Well-formed, but a name that would drive a terminal (clear screen, red), and one
+     * longer than any process name: a viewer must print neither. */
+    char esc[] = "nudge-\x1b[2J\x1b[31mhijacked", longname[200];
+    memset(longname, 'n', sizeof longname - 1);
+    longname[sizeof longname - 1] = 0;
+    char *names[2] = {esc, longname};
+    for (int k = 0; k < 2; k++) {
+      m.name = names[k];
+      const int l = nudge_status_t_encode(j->buf, 0, MAX_MSG, &m);
+      if (l > 0) send_raw(j, j->buf, l, 0);
+      else j->failed = 1;
+    }
+    m.name = name;
   }
 }
 

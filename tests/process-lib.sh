@@ -28,6 +28,14 @@ pt_check() {
   if "$@"; then pt_ok "$what"; else pt_fail "$what"; fi
 }
 
+# pt_check_not DESCRIPTION COMMAND...: ok if COMMAND fails. (Instead of bash -c "! ...":
+# no path or value is ever pasted into a string a shell parses again.)
+pt_check_not() {
+  local what=$1
+  shift
+  if "$@"; then pt_fail "$what"; else pt_ok "$what"; fi
+}
+
 # A figure line, also kept in $PT_WORK/figures.
 pt_figure() { printf '%s %s %s\n' "$1" "$2" "$3" | tee -a "$PT_WORK/figures"; }
 

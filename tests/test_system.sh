@@ -65,7 +65,7 @@ if pt_up_wait "$RUN" 30 "$up"; then
   pt_figure stop_time $((($(pt_now_us) - t_int) / 1000)) ms
   pt_check "nudge-up run exits 0 after SIGINT (got $PT_RC)" test "$PT_RC" -eq 0
   pt_restarts_are "$RUN"
-  pt_check "no process needed SIGKILL" bash -c "! grep -q SIGKILL '$RUN/supervisor.log'"
+  pt_check_not "no process needed SIGKILL" grep -q SIGKILL "$RUN/supervisor.log"
   pt_none_left "$RUN"
 else
   pt_fail "nudge-up run did not come up within 30 s (see supervisor.log below)"
