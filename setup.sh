@@ -14,7 +14,9 @@ usage: ./setup.sh [COMMAND] [ARGS...]
   demo [ARGS]   set up, build, and run the process system pushing the object to 5 goals
                 in emulation (nudge-up demo; ARGS go to it, see build/bin/nudge-up --help)
   test          set up, build, and run every test (ctest)
-  test-asan     set up, build with AddressSanitizer + UBSan into build-asan/, run the unit tests
+  test-asan     set up, build with AddressSanitizer + UBSan into build-asan/, run the unit
+                tests and the process tests (every nudge program instrumented; a sanitizer
+                report in any process log fails the test; waits scaled by NUDGE_SLOW=3)
   build         set up and build only (the default)
   fuzz [SECS]   build the libFuzzer targets with clang into build-fuzz/ and run each for SECS
                 seconds (default 60); prints fuzz_<name>_execs lines, fails on a crash
@@ -120,5 +122,5 @@ case "$cmd" in
   fuzz) fuzz_run "$@" ;;
   test-asan)
     build build-asan -DNUDGE_SANITIZE=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo
-    cd build-asan && exec ctest --output-on-failure -j 2 -L unit ;;
+    cd build-asan && exec ctest --output-on-failure -j 2 -L 'unit|process' ;;
 esac

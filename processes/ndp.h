@@ -99,6 +99,13 @@ void ndp_refused(ndp_ratelog *rl, const char *prog, const char *what, const char
  * cores - 2 above, at least 1. */
 int ndp_default_threads(void);
 
+/* Lock every current and future page into RAM (mlockall), so a 1 kHz loop never waits
+ * on a page fault. Return 0 when locked; 1 when skipped because this is an
+ * AddressSanitizer build (its runtime turns mlockall into a no-op that reports success,
+ * and locking its shadow memory, terabytes of reserved address space, could not work);
+ * -1 when the kernel refused, with a message. Either way the caller can go on. */
+int ndp_lock_memory(char *err, int errlen);
+
 /* Drain every queued message without blocking (LCM's queues drop the newest when full). */
 void ndp_drain(lcm_t *lcm);
 

@@ -17,7 +17,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/mman.h>
 #include <time.h>
 
 #include "nd_jitter.h"
@@ -578,10 +577,14 @@ int main(int argc, char **argv) {
 
   const char *lock = "not requested";
   if (!cfg.no_rt) {
-    if (mlockall(MCL_CURRENT | MCL_FUTURE) == 0) lock = "locked";
-    else {
-      fprintf(stderr, "%s: mlockall refused (%s): page faults may delay the world loop\n",
-              PROG, strerror(errno));
+    char why[160];
+    const int lk = ndp_lock_memory(why, sizeof why);
+    if (lk == 0) {
+      lock = "locked";
+    } else if (lk > 0) {
+      lock = "not locked: AddressSanitizer build";
+    } else {
+      fprintf(stderr, "%s: %s: page faults may delay the world loop\n", PROG, why);
       lock = "not locked";
     }
   }

@@ -25,7 +25,6 @@
 #include <string.h>
 #include <poll.h>
 #include <sys/eventfd.h>
-#include <sys/mman.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -469,11 +468,14 @@ static int parse_args(int argc, char **argv, exec_opts *o) {
 /* ---- main --------------------------------------------------------------------------- */
 
 /* Lock memory before the loop thread exists: mlockall populates every mapping, and a
- * loop running meanwhile would stall on page faults. Say once if refused. */
+ * loop running meanwhile would stall on page faults. Say once if not locked. */
 static void lock_memory(void) {
-  if (mlockall(MCL_CURRENT | MCL_FUTURE) != 0)
-    fprintf(stderr, PROG ": mlockall refused (%s); going on with pageable memory\n",
-            strerror(errno));
+  char err[160];
+  const int rc = ndp_lock_memory(err, sizeof err);
+  if (rc < 0)
+    fprintf(stderr, PROG ": %s; going on with pageable memory\n", err);
+  else if (rc > 0)
+    fprintf(stderr, PROG ": memory not locked (AddressSanitizer build)\n");
 }
 
 /* Put the loop thread t and (lower) this thread on SCHED_FIFO; say once if refused. */

@@ -40,16 +40,16 @@ CHANNELS=(MOCAP ROBOT_STATE EE_CMD PARAMS PLAN TASK EPISODE)
 
 pt_logger "$LOG"
 pt_spawn up "$PT_BIN/nudge-up" run --log-dir "$RUN" 2>"$PT_WORK/up.err"
-pt_up_wait "$RUN" 30 "$up" || { pt_fail "nudge-up run did not come up within 30 s (see supervisor.log below)"; exit 1; }
+pt_up_wait "$RUN" 30 "$up" || { pt_fail "nudge-up run did not come up within $((30 * PT_SLOW)) s (see supervisor.log below)"; exit 1; }
 pt_ok "nudge-up run: all processes up"
 pids_before=$(pt_logged_pids "$RUN" | sort | tr '\n' ' ')
 
 # Not the adapter's buffer: a refit would load both cores while the injections run.
-pt_spawn tasks "$PT_BIN/nudge-tasks" --goal 0.15,0,0 --goal 0.25,0.10,0.4 --tau 8 \
+pt_spawn tasks "$PT_BIN/nudge-tasks" --goal 0.15,0,0 --goal 0.25,0.10,0.4 --tau "$(pt_slow 8)" \
   --goal 0.15,0.15,0,1e-6,15 --record "$PT_WORK/rec.nrb" >"$PT_WORK/tasks.out" \
   2>"$PT_WORK/tasks.err"
-"$PT_BIN/nudge-status" --wait nudge-tasks --timeout 10 ||
-  pt_fail "no heartbeat from nudge-tasks within 10 s"
+"$PT_BIN/nudge-status" --wait nudge-tasks --timeout "$(pt_slow 10)" ||
+  pt_fail "no heartbeat from nudge-tasks within $(pt_slow 10) s"
 
 # Heartbeats are 1 Hz: wait until every reader of the channel has one after the burst.
 has_beat_after() { # NAME UTIME
@@ -101,7 +101,7 @@ fi
 if pt_wait_pid "$tasks" 40; then
   pt_check "nudge-tasks (running through the injections) exits 0 (got $PT_RC)" test "$PT_RC" -eq 0
 else
-  pt_fail "nudge-tasks did not finish within 40 s"
+  pt_fail "nudge-tasks did not finish within $((40 * PT_SLOW)) s"
 fi
 cat "$PT_WORK/tasks.out"
 pt_check "EPISODE: the tasks run during the injections ended, at least one reached its goal" \
@@ -112,9 +112,9 @@ pt_check "the recorder recorded the 3 tasks run through the injections ($nrec)" 
 
 # Still working: a further task gets plans and smooth setpoints.
 t_after=$(pt_now_us)
-pt_spawn tasks2 "$PT_BIN/nudge-tasks" --goal 0.25,0.25,0.8 --tau 4 >"$PT_WORK/tasks2.out" \
+pt_spawn tasks2 "$PT_BIN/nudge-tasks" --goal 0.25,0.25,0.8 --tau "$(pt_slow 4)" >"$PT_WORK/tasks2.out" \
   2>"$PT_WORK/tasks2.err"
-pt_wait_pid "$tasks2" 20 || pt_fail "the further nudge-tasks did not finish within 20 s"
+pt_wait_pid "$tasks2" 20 || pt_fail "the further nudge-tasks did not finish within $((20 * PT_SLOW)) s"
 cat "$PT_WORK/tasks2.out"
 pt_val nplans last "$LOG" PLAN --after-utime "$t_after" last_count
 pt_figure plans_after_injection "${nplans:-0}" count
