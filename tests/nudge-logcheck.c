@@ -17,6 +17,7 @@
 
 #include "nd_exec.h"
 #include "nd_parse.h"
+#include "nd_rbuf.h"
 #include "ndp.h"
 #include "ndp_validate.h"
 
@@ -510,6 +511,33 @@ static int cmd_live(const lc_opts *o) {
   return 0;
 }
 
+/* ---- buffer: the replay buffer file, not a log ------------------------------------- */
+
+/* Every record of the replay buffer o->log, decoded as a rollout: how many, where the
+ * valid ones end and why. Fails when the file cannot be read, a record does not decode,
+ * or the valid records do not reach the end of the file. */
+static int cmd_buffer(const lc_opts *o) {
+  nd_rollout *rs = NULL;
+  int n = 0;
+  nd_rfile_tail t;
+  char err[512];
+  if (nd_rbuf_read_all(o->log, &rs, &n, &t, err, sizeof err)) {
+    fprintf(stderr, PROG ": %s\n", err);
+    return 1;
+  }
+  int64_t steps = 0;
+  for (int i = 0; i < n; i++) steps += rs[i].n;
+  nd_rbuf_free_all(rs, n);
+  printf("buffer_records %d count\n", n);
+  printf("buffer_steps %lld count\n", (long long)steps);
+  printf("buffer_valid_bytes %lld bytes\n", (long long)t.offset);
+  printf("buffer_file_bytes %lld bytes\n", (long long)t.size);
+  if (t.status != ND_RFILE_END)
+    fail("%s: valid records end at offset %lld of %lld: %s (%s)", o->log, (long long)t.offset,
+         (long long)t.size, t.why, nd_rfile_status_name(t.status));
+  return 0;
+}
+
 /* ---- command line ------------------------------------------------------------------- */
 
 static void usage(FILE *f) {
@@ -539,7 +567,9 @@ static void usage(FILE *f) {
           "  status LOG NAME  heartbeat counters of process NAME: the last one, or\n"
           "      --before-utime U (last before U), --after-utime U (first after U), --pid P\n"
           "  live LOG         plans so far, newest setpoint's speed and mode\n"
-          "      --min-plans N, --min-speed S (and tracking)\n",
+          "      --min-plans N, --min-speed S (and tracking)\n"
+          "  buffer FILE      a replay buffer (not a log): records, steps, valid bytes;\n"
+          "                   fails unless every record decodes and they reach the end\n",
           d.v_max, d.a_max, d.j_max);
 }
 
@@ -577,7 +607,7 @@ static int parse_args(int argc, char **argv, lc_opts *o) {
   int i = 3;
   const int needs_arg = !strcmp(o->cmd, "status") || !strcmp(o->cmd, "last");
   if (strcmp(o->cmd, "episodes") && strcmp(o->cmd, "ee-cmd") && strcmp(o->cmd, "stop-after") &&
-      strcmp(o->cmd, "live") && !needs_arg) {
+      strcmp(o->cmd, "live") && strcmp(o->cmd, "buffer") && !needs_arg) {
     snprintf(err, sizeof err, "unknown command '%s'", o->cmd);
     return bad_arg(err);
   }
@@ -639,6 +669,7 @@ int main(int argc, char **argv) {
   else if (!strcmp(o.cmd, "stop-after")) rc = cmd_stop_after(&o);
   else if (!strcmp(o.cmd, "last")) rc = cmd_last(&o);
   else if (!strcmp(o.cmd, "status")) rc = cmd_status(&o);
+  else if (!strcmp(o.cmd, "buffer")) rc = cmd_buffer(&o);
   else rc = cmd_live(&o);
   return rc ? rc : failures ? 1 : 0;
 }

@@ -10,6 +10,7 @@ PT_NAME=${PT_NAME:-process-test}
 PT_FAILS=0
 PT_PIDS=()          # everything started, for the EXIT trap
 PT_LOGGER=""
+PT_ON_CLEANUP=()    # commands run at exit after the processes stop, before PT_WORK goes
 
 pt_say() { printf '%s: %s\n' "$PT_NAME" "$*"; }
 
@@ -26,6 +27,11 @@ pt_check() {
   shift
   if "$@"; then pt_ok "$what"; else pt_fail "$what"; fi
 }
+
+# pt_on_cleanup CMD: run CMD (a string, eval'd) at exit, after everything started has
+# stopped and before the work directory is removed: e.g. unmount what the test mounted
+# there, which rm -rf cannot remove.
+pt_on_cleanup() { PT_ON_CLEANUP+=("$1"); }
 
 # A figure line, also kept in $PT_WORK/figures.
 pt_figure() { printf '%s %s %s\n' "$1" "$2" "$3" | tee -a "$PT_WORK/figures"; }
@@ -244,6 +250,8 @@ pt_cleanup() {
   if ((rc != 0 || PT_FAILS > 0)); then
     pt_dump_logs "$PT_WORK"/*/*.log "$PT_WORK"/*.out "$PT_WORK"/*.err
   fi
+  local c
+  for c in "${PT_ON_CLEANUP[@]}"; do eval "$c"; done
   [[ -n ${PT_WORK:-} && -d $PT_WORK ]] && rm -rf -- "$PT_WORK"
   if ((rc == 0 && PT_FAILS > 0)); then rc=1; fi
   if ((rc == 0)); then pt_say "PASSED"; elif ((rc != 77)); then pt_say "FAILED ($PT_FAILS failed checks, status $rc)"; fi
