@@ -3,6 +3,9 @@
 # then runs what you asked for. Safe to run again: it only installs what is absent and
 # only rebuilds what changed.
 set -euo pipefail
+# Whatever the caller's umask, nothing built here (the programs in build/bin among them)
+# or run from here may be world-writable.
+umask "$(printf '%04o' $((8#$(umask) | 8#002)))"
 
 usage() {
   cat <<'USAGE'
@@ -11,7 +14,9 @@ usage: ./setup.sh [COMMAND] [ARGS...]
   demo [ARGS]   set up, build, and run the process system pushing the object to 5 goals
                 in emulation (nudge-up demo; ARGS go to it, see build/bin/nudge-up --help)
   test          set up, build, and run every test (ctest)
-  test-asan     set up, build with AddressSanitizer + UBSan into build-asan/, run the unit tests
+  test-asan     set up, build with AddressSanitizer + UBSan into build-asan/, run the unit
+                tests and the process tests (every nudge program instrumented; a sanitizer
+                report in any process log fails the test; waits scaled by NUDGE_SLOW=3)
   build         set up and build only (the default)
   fuzz [SECS]   build the libFuzzer targets with clang into build-fuzz/ and run each for SECS
                 seconds (default 60); prints fuzz_<name>_execs lines, fails on a crash
@@ -117,5 +122,5 @@ case "$cmd" in
   fuzz) fuzz_run "$@" ;;
   test-asan)
     build build-asan -DNUDGE_SANITIZE=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo
-    cd build-asan && exec ctest --output-on-failure -j 2 -L unit ;;
+    cd build-asan && exec ctest --output-on-failure -j 2 -L 'unit|process' ;;
 esac

@@ -32,6 +32,10 @@ typedef struct {
                          noise is periodic over the horizon like iCEM's reference generator,
                          and has no effect for horizon <= 2 (one frequency only) */
   double std_min;     /* floor of every std after an update */
+  double step_std;    /* >= 0: a std is at least step_std times its mean's step in the
+                         update, so (for step_std >= 1) it grows while the elites lie on
+                         one side (a slope) and shrinks once they straddle the optimum;
+                         0: plain CEM */
   const double *lower; /* per-dim bounds (dim values) or NULL for none (each side on its
                           own); samples, mean and shifted elites are clipped */
   const double *upper;

@@ -670,3 +670,8 @@ void nd_rfile_reader_close(nd_rfile_reader *r) {
   r->buf = NULL;
   r->cap = 0;
 }
+
+void nd_rfile_umask_no_world_write(void) {
+  const mode_t old = umask(0);
+  umask(old | S_IWOTH);
+}

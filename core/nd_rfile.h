@@ -152,4 +152,10 @@ void nd_rfile_reader_close(nd_rfile_reader *r);
 /* "end", "torn" or "corrupt". */
 const char *nd_rfile_status_name(int status);
 
+/* Add "others may not write" to the process umask, keeping every bit already set: what
+ * this process and its children then create with default modes (CSVs, figures, MuJoCo's
+ * log) is never world-writable, even when it was started under umask 0. Record files need
+ * no help (created 0640). umask is per process: call it before starting threads. */
+void nd_rfile_umask_no_world_write(void);
+
 #endif

@@ -5,6 +5,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
 #include <sys/select.h>
 #include <time.h>
 #include <unistd.h>
@@ -57,6 +58,12 @@ double ndp_mono(void) {
   struct timespec ts;
   clock_gettime(CLOCK_MONOTONIC, &ts);
   return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+double ndp_sent_mono(int64_t utime) {
+  const double now = ndp_mono();
+  const double delay = 1e-6 * (double)(ndp_utime() - utime);
+  return delay > 0.0 ? now - delay : now;
 }
 
 static const char *mj_prog = "nudge";
@@ -124,6 +131,27 @@ int ndp_default_threads(void) {
   long n = sysconf(_SC_NPROCESSORS_ONLN);
   long t = n <= 4 ? n - 1 : n - 2;
   return t < 1 ? 1 : (int)t;
+}
+
+/* GCC says __SANITIZE_ADDRESS__, clang __has_feature(address_sanitizer). */
+#if defined(__SANITIZE_ADDRESS__)
+#define NDP_ASAN 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define NDP_ASAN 1
+#endif
+#endif
+
+int ndp_lock_memory(char *err, int errlen) {
+#ifdef NDP_ASAN
+  (void)err;
+  (void)errlen;
+  return 1;
+#else
+  if (mlockall(MCL_CURRENT | MCL_FUTURE) == 0) return 0;
+  snprintf(err, errlen, "mlockall refused (%s)", strerror(errno));
+  return -1;
+#endif
 }
 
 void ndp_drain(lcm_t *lcm) {

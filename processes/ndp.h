@@ -42,6 +42,13 @@ int64_t ndp_utime(void);
 /* Monotonic time in seconds (loops, timeouts). */
 double ndp_mono(void);
 
+/* The ndp_mono() time at which a message stamped utime (its sender's wall clock) was sent:
+ * now less its time on the way. Input freshness counts from here, not from handling: a
+ * process resuming from a stall (SIGSTOP, a debugger, starvation) handles what queued up
+ * meanwhile, and by handling time a state or plan a second old would look new. Needs the
+ * hosts' wall clocks in sync; a sender's clock ahead of ours counts as no delay. */
+double ndp_sent_mono(int64_t utime);
+
 /* Route MuJoCo errors to stderr with the program name and exit(1) (MuJoCo's handler
  * must not return), and keep MuJoCo warnings off stdout and out of MUJOCO_LOG.TXT:
  * callers detect instabilities through mjData's warning counters. */
@@ -91,6 +98,13 @@ void ndp_refused(ndp_ratelog *rl, const char *prog, const char *what, const char
 /* Rollout workers that leave the 1 kHz processes a core: cores - 1 up to 4 cores,
  * cores - 2 above, at least 1. */
 int ndp_default_threads(void);
+
+/* Lock every current and future page into RAM (mlockall), so a 1 kHz loop never waits
+ * on a page fault. Return 0 when locked; 1 when skipped because this is an
+ * AddressSanitizer build (its runtime turns mlockall into a no-op that reports success,
+ * and locking its shadow memory, terabytes of reserved address space, could not work);
+ * -1 when the kernel refused, with a message. Either way the caller can go on. */
+int ndp_lock_memory(char *err, int errlen);
 
 /* Drain every queued message without blocking (LCM's queues drop the newest when full). */
 void ndp_drain(lcm_t *lcm);

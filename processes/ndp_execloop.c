@@ -73,6 +73,7 @@ int ndp_execloop_cycle(ndp_execloop *s, double now, int64_t utime) {
         s->have_plan = 1;
         s->t_plan = s->plan.t_arrive;
         s->rep.plan_id = s->plan.plan_id;
+        s->rep.plan_utime = s->plan.utime;
         s->rep.accepted++;
       } else {
         /* A refused plan does not refresh the plan clock: a planner sending only
@@ -81,6 +82,8 @@ int ndp_execloop_cycle(ndp_execloop *s, double now, int64_t utime) {
         s->rep.refused_id = s->plan.plan_id;
         dirty = 1;
       }
+    } else {
+      s->rep.late++;
     }
   }
 
@@ -103,6 +106,7 @@ int ndp_execloop_cycle(ndp_execloop *s, double now, int64_t utime) {
   m.utime = utime;
   m.seq = s->seq++;
   m.plan_id = s->rep.plan_id;
+  m.plan_utime = s->rep.plan_utime;
   m.mode = (int8_t)mode;
   for (int ax = 0; ax < 2; ax++) {
     m.p[ax] = sp[ax][ND_P];

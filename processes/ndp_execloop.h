@@ -23,16 +23,17 @@
 
 #define NDP_EXECLOOP_REPORT_PERIOD 0.1  /* s between routine report posts */
 
-/* Newest robot state: only what the loop needs, stamped with its local arrival time. */
+/* Newest robot state: only what the loop needs, stamped with when it was sent. */
 typedef struct {
-  double t_arrive;     /* ndp_mono() when the I/O thread received it */
+  double t_arrive;     /* ndp_mono() when it was sent (ndp_sent_mono): ages count from there */
   double ee_pos[3];
 } ndp_execloop_state_in;
 
 /* Newest plan: its first keypoint and segment duration. */
 typedef struct {
-  double t_arrive;
+  double t_arrive;     /* as ndp_execloop_state_in's */
   int64_t plan_id;
+  int64_t utime;       /* plan_t.utime, passed on in EE_CMD.plan_utime */
   double key[4];       /* (x, y, vx, vy) */
   double T;
 } ndp_execloop_plan_in;
@@ -49,9 +50,11 @@ typedef struct {
   int64_t n_stale, n_resume;/* transitions to stale and back */
   int64_t cycles, sent;     /* loop cycles; setpoints committed to the ring */
   int64_t accepted, refused;/* plans taken / refused by nd_exec */
+  int64_t late;             /* plans already stale when the loop took them: dropped */
   int64_t refused_id;       /* plan_id of the last refused plan */
   char refused_why[160];    /* nd_exec's reason for it */
   int64_t plan_id;          /* plan being followed, -1 before the first */
+  int64_t plan_utime;       /* its utime, 0 before the first */
   int64_t missed;           /* deadlines skipped after overruns */
   ndp_loop_stats loop;      /* period error (us) and overruns */
 } ndp_execloop_report;
@@ -78,11 +81,11 @@ typedef struct {
   uint64_t v_state, v_plan;     /* mailbox versions taken */
   int have_state;               /* first robot state seen: nd_exec initialised */
   double z;                     /* sphere height: the first measured ee z */
-  double t_state;               /* arrival of the newest robot state */
+  double t_state;               /* send time of the newest robot state */
   int pending;                  /* plan taken but not yet applied */
   ndp_execloop_plan_in plan;
   int have_plan;                /* a plan has been accepted */
-  double t_plan;                /* arrival of the newest accepted plan */
+  double t_plan;                /* send time of the newest accepted plan */
   nd_exec ex;
   int64_t seq;
   nd_jitter jit;                /* wake-up errors, added by the caller's clock loop */

@@ -57,6 +57,10 @@ int ndp_check_ee_cmd(const nudge_ee_cmd_t *m, char *why, int len) {
     snprintf(why, len, "mode = %d is not a known mode", m->mode);
     return -1;
   }
+  if (m->plan_utime < 0) {
+    snprintf(why, len, "plan_utime = %lld is negative", (long long)m->plan_utime);
+    return -1;
+  }
   return 0;
 }
 

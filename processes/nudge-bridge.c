@@ -17,7 +17,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/mman.h>
 #include <time.h>
 
 #include "nd_jitter.h"
@@ -353,7 +352,9 @@ static void usage(FILE *f) {
           "  --seconds S        run S seconds, then exit 0 (default: until SIGINT/SIGTERM)\n"
           "  --lcm-url URL      LCM URL (default: $LCM_DEFAULT_URL, else %s)\n"
           "  --no-rt            do not ask for SCHED_FIFO and mlockall\n"
-          "  -h, --help         this text\n",
+          "  -h, --help         this text\n\n"
+          "Exit status: 0 after SIGINT/SIGTERM or --seconds, 1 on a runtime failure (LCM),\n"
+          "2 on bad arguments, a --model file among them (missing, malformed, unusable).\n",
           NDP_DEFAULT_URL);
 }
 
@@ -499,15 +500,19 @@ int main(int argc, char **argv) {
   memcpy(sc.theta, cfg.theta, sizeof(sc.theta));
   sc.timestep = 1.0 / cfg.rate;
   if (cfg.model_path) {
-    /* MuJoCo's parser reports a missing file as an XML error: say it plainly. */
+    /* A file that is missing or not a usable scene is a bad argument (status 2): the
+     * supervisor must not restart the bridge on it. MuJoCo's parser reports a missing file
+     * as an XML error: say it plainly. */
     FILE *probe = fopen(cfg.model_path, "r");
     if (!probe) {
       fprintf(stderr, "%s: cannot open --model %s: %s\n", PROG, cfg.model_path, strerror(errno));
+      status = 2;
       goto done;
     }
     fclose(probe);
     if (nds_model_load_file(&b->nm, cfg.model_path, &sc, err, sizeof(err))) {
       fprintf(stderr, "%s: cannot use --model %s: %s\n", PROG, cfg.model_path, err);
+      status = 2;
       goto done;
     }
     /* Simulated time must be real time: the file's timestep sets the rate unless --rate
@@ -518,6 +523,7 @@ int main(int argc, char **argv) {
       if (cfg.rate < 20.0 || cfg.rate > 10000.0) {
         fprintf(stderr, "%s: --model %s: timestep %g s is outside [0.1, 50] ms for a real-time "
                         "world; give --rate\n", PROG, cfg.model_path, dt);
+        status = 2;
         goto done;
       }
     } else if (fabs(dt * cfg.rate - 1.0) > 1e-9) {
@@ -571,10 +577,14 @@ int main(int argc, char **argv) {
 
   const char *lock = "not requested";
   if (!cfg.no_rt) {
-    if (mlockall(MCL_CURRENT | MCL_FUTURE) == 0) lock = "locked";
-    else {
-      fprintf(stderr, "%s: mlockall refused (%s): page faults may delay the world loop\n",
-              PROG, strerror(errno));
+    char why[160];
+    const int lk = ndp_lock_memory(why, sizeof why);
+    if (lk == 0) {
+      lock = "locked";
+    } else if (lk > 0) {
+      lock = "not locked: AddressSanitizer build";
+    } else {
+      fprintf(stderr, "%s: %s: page faults may delay the world loop\n", PROG, why);
       lock = "not locked";
     }
   }

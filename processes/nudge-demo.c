@@ -10,6 +10,7 @@
 
 #include "nd_math.h"
 #include "nd_parse.h"
+#include "nd_rfile.h"
 #include "nds_episode.h"
 
 /* Five goals around the start pose (object at the origin, yaw 0): straight, sideways
@@ -60,8 +61,12 @@ int main(int argc, char **argv) {
       usage(stdout);
       return 0;
     }
-    if (i + 1 >= argc) {
-      fprintf(stderr, "nudge-demo: unknown option or missing value: %s\n", a);
+    const int known = !strcmp(a, "--seed") || !strcmp(a, "--pop") || !strcmp(a, "--iters") ||
+                      !strcmp(a, "--threads") || !strcmp(a, "--goals") ||
+                      !strcmp(a, "--plan-dt") || !strcmp(a, "--tau");
+    if (!known || i + 1 >= argc) {
+      fprintf(stderr, known ? "nudge-demo: %s needs a value\n" : "nudge-demo: unknown option: %s\n",
+              a);
       usage(stderr);
       return 2;
     }
@@ -84,6 +89,9 @@ int main(int argc, char **argv) {
       return 2;
     }
   }
+  /* The one file it may write is MuJoCo's MUJOCO_LOG.TXT (on a warning): not world-writable
+   * even under umask 0. */
+  nd_rfile_umask_no_world_write();
 
   nds_scene_cfg wc, pc;
   nds_scene_cfg_default(&wc);

@@ -2,7 +2,9 @@
  *
  * Follows the newest PLAN's first keypoint with a minimum-snap segment (core/nd_exec.h)
  * and publishes the setpoint (p, v, a) on EE_CMD every cycle. When the plan or the
- * robot state goes stale it brakes to rest and holds; a fresh plan resumes.
+ * robot state goes stale it brakes to rest and holds; a fresh plan resumes. Every
+ * setpoint names the plan it follows (plan_id, plan_utime), so a log shows that no
+ * setpoint moved on a plan older than the timeout.
  *
  * Two threads. The main thread owns LCM: it validates inputs and posts the newest of
  * each kind into a mailbox, publishes what the loop left in the ring, logs, and sends the
@@ -25,7 +27,6 @@
 #include <string.h>
 #include <poll.h>
 #include <sys/eventfd.h>
-#include <sys/mman.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -128,6 +129,7 @@ typedef struct {
   ndp_status st;
   int backlog_max;     /* most setpoints found waiting in the ring at once */
   ndp_ratelog log_state, log_plan, log_exec;  /* refused inputs; plans nd_exec refused */
+  ndp_ratelog log_old;                        /* plans made from a state too old */
 } io_ctx;
 
 static void on_state(const lcm_recv_buf_t *rbuf, const char *ch,
@@ -143,7 +145,7 @@ static void on_state(const lcm_recv_buf_t *rbuf, const char *ch,
     return;
   }
   ndp_execloop_state_in in;
-  in.t_arrive = ndp_mono();
+  in.t_arrive = ndp_sent_mono(msg->utime);
   memcpy(in.ee_pos, msg->ee_pos, sizeof in.ee_pos);
   nd_mailbox_post(&c->io->x.state, &in, (int)sizeof(in));
 }
@@ -161,8 +163,9 @@ static void on_plan(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_plan
     return;
   }
   ndp_execloop_plan_in in;
-  in.t_arrive = ndp_mono();
+  in.t_arrive = ndp_sent_mono(msg->utime);
   in.plan_id = msg->plan_id;
+  in.utime = msg->utime;
   memcpy(in.key, msg->keypoints[0], sizeof in.key);
   /* The planner's rollouts reach keypoint 0 at state_utime + T. The plan arrives a planning
    * time later, so the segment is shortened by that age to keep the keypoint where the
@@ -171,6 +174,16 @@ static void on_plan(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_plan
    * for this (same host here); the clamp to T/2 bounds the harm of a skewed clock. */
   double age = 1e-6 * (double)(ndp_utime() - msg->state_utime);
   if (!(age > 0.0)) age = 0.0;
+  /* A plan whose first keypoint was due before it arrived was made from a state the robot
+   * has left (a planner stalled mid-plan, or one that planned on input it handled late):
+   * even shortened, following it would move on stale information. */
+  if (age > msg->T) {
+    snprintf(why, sizeof why,
+             "plan %lld started from a state %.0f ms old, older than its segment (%.0f ms)",
+             (long long)msg->plan_id, 1e3 * age, 1e3 * msg->T);
+    ndp_refused(&c->log_old, PROG, "PLAN", why);
+    return;
+  }
   if (age > 0.5 * msg->T) age = 0.5 * msg->T;
   in.T = msg->T - age;
   nd_mailbox_post(&c->io->x.plan, &in, (int)sizeof(in));
@@ -216,7 +229,8 @@ static void usage(FILE *f) {
           "until the first ROBOT_STATE; brakes to rest and holds while PLAN or ROBOT_STATE\n"
           "is stale; a fresh plan resumes.\n\n"
           "  --rate HZ       loop rate (default 1000)\n"
-          "  --timeout S     inputs older than this are stale (default 0.1)\n"
+          "  --timeout S     inputs older than this are stale (default 0.1); age counts\n"
+          "                  from the message's utime, so hosts need synced clocks\n"
           "  --v-max M/S     speed limit (default %g)\n"
           "  --a-max M/S2    acceleration limit (default %g)\n"
           "  --j-max M/S3    jerk limit (default %g)\n"
@@ -279,11 +293,14 @@ static int parse_args(int argc, char **argv, exec_opts *o) {
 /* ---- main --------------------------------------------------------------------------- */
 
 /* Lock memory before the loop thread exists: mlockall populates every mapping, and a
- * loop running meanwhile would stall on page faults. Say once if refused. */
+ * loop running meanwhile would stall on page faults. Say once if not locked. */
 static void lock_memory(void) {
-  if (mlockall(MCL_CURRENT | MCL_FUTURE) != 0)
-    fprintf(stderr, PROG ": mlockall refused (%s); going on with pageable memory\n",
-            strerror(errno));
+  char err[160];
+  const int rc = ndp_lock_memory(err, sizeof err);
+  if (rc < 0)
+    fprintf(stderr, PROG ": %s; going on with pageable memory\n", err);
+  else if (rc > 0)
+    fprintf(stderr, PROG ": memory not locked (AddressSanitizer build)\n");
 }
 
 /* Put the loop thread t and (lower) this thread on SCHED_FIFO; say once if refused. */
@@ -424,7 +441,7 @@ int main(int argc, char **argv) {
       note_report(&c, &rep, &last);
       loop = rep.loop;
       c.st.state = rep.mode < 0 ? "waiting" : nd_exec_mode_name(rep.mode);
-      c.st.rejected = c.log_state.count + c.log_plan.count + rep.refused;
+      c.st.rejected = c.log_state.count + c.log_plan.count + c.log_old.count + rep.refused;
     }
     const uint64_t drops = atomic_load(&io.x.ring.dropped);
     if (drops != drops_seen) {
@@ -442,18 +459,20 @@ int main(int argc, char **argv) {
   if (nd_mailbox_take(&io.x.report, &v_rep, &rep, (int)sizeof rep) == (int)sizeof rep) {
     loop = rep.loop;
     c.st.state = rep.mode < 0 ? "waiting" : nd_exec_mode_name(rep.mode);
-    c.st.rejected = c.log_state.count + c.log_plan.count + rep.refused;
+    c.st.rejected = c.log_state.count + c.log_plan.count + c.log_old.count + rep.refused;
     last = rep;
   }
   ndp_status_tick(lcm, &c.st, 1);
   fprintf(stderr,
           PROG ": stopped after %lld cycles, %lld setpoints; period error p50 %d us, p99 %d "
                "us, max %d us; %lld overruns (%lld deadlines skipped); %llu ring drops; "
-               "max publish backlog %d; plans %lld taken, %lld refused\n",
+               "max publish backlog %d; plans %lld taken, %lld refused, %lld stale on arrival, "
+               "%lld from an outdated state\n",
           (long long)last.cycles, (long long)last.sent, loop.p50_us, loop.p99_us,
           loop.max_us, (long long)loop.overruns, (long long)last.missed,
           (unsigned long long)drops_seen, c.backlog_max, (long long)last.accepted,
-          (long long)last.refused);
+          (long long)last.refused, (long long)last.late,
+          (long long)c.log_old.count);
   close(io.bell);
   nudge_robot_state_t_unsubscribe(lcm, sub_state);
   nudge_plan_t_unsubscribe(lcm, sub_plan);

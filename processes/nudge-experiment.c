@@ -20,6 +20,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -56,7 +57,7 @@ static const char *pname[NFIT] = {"slide", "torsion", "roll"};
 
 typedef struct {
   int runs, episodes, threads, pop, iters, neval, mode, force, quick, landscape;
-  double tau, plan_dt;
+  double tau, plan_dt, window;
   uint64_t seed;
   double D[MAX_D];
   int nD;
@@ -124,7 +125,9 @@ static void usage(FILE *f) {
 "  --iters N        planner iterations (default 4)\n"
 "  --tau S          task time limit, s (default 5)\n"
 "  --eval-tasks K   evaluation tasks (the demo's goals), 1..5 (default 5)\n"
-"  --replay MODE    refit replay: setpoint (default) or force (see below)\n"
+"  --replay MODE    refit replay: force (default) or setpoint (see below)\n"
+"  --window S       refit replay re-anchored on the observations every S s (default\n"
+"                   0.1; 0: one shot from the initial state, the paper's; nds_replay.h)\n"
 "  --plan-dt S      planning model timestep, s (default 0.005; world and refit: 0.001)\n"
 "  --quick          a preset for a first look, under 10 min on 2 cores: --runs 3\n"
 "                   --episodes 4 --pop 32 --iters 2 --tau 3 (explicit options win)\n"
@@ -134,7 +137,8 @@ static void usage(FILE *f) {
 "  -h, --help       this text\n\n"
 "Replay modes: force replays the recorded force on the sphere open loop (the paper's\n"
 "simulation); setpoint replays the recorded setpoints through the robot's tracking\n"
-"controller, which keeps the sphere on its path under a wrong theta (smoother loss).\n\n"
+"controller, which keeps the sphere on its path under a wrong theta but hides most of\n"
+"what sliding friction does. Re-anchoring keeps force's open loop from running away.\n\n"
 "Writes DIR/run_d<D>_r<run>.csv (one row per episode, 0 = the initial mean),\n"
 "DIR/summary.csv (per D and episode: mean, std, min, max, median over runs),\n"
 "DIR/buffer_d<D>_r<run>.nbuf (the replay buffers), DIR/validation.nbuf, DIR/config.txt,\n"
@@ -192,7 +196,12 @@ static int parse_args(int argc, char **argv, opts *o) {
   if (o->threads > 64) o->threads = 64;
   o->seed = 1;
   o->plan_dt = 0.005;
-  o->mode = NDS_REPLAY_SETPOINT;
+  {
+    nds_fit_cfg fd;  /* the fit's defaults */
+    nds_fit_cfg_default(&fd);
+    o->mode = fd.replay.mode;
+    o->window = fd.replay.window;
+  }
   o->D[0] = 0.2, o->D[1] = 1.0, o->nD = 2;
   for (int i = 1; i < argc; i++) {
     const char *a = argv[i];
@@ -203,8 +212,14 @@ static int parse_args(int argc, char **argv, opts *o) {
     if (!strcmp(a, "--quick")) { o->quick = 1; continue; }
     if (!strcmp(a, "--force")) { o->force = 1; continue; }
     if (!strcmp(a, "--landscape")) { o->landscape = 1; continue; }
-    if (strncmp(a, "--", 2) || i + 1 >= argc) {
-      fprintf(stderr, PROG ": unknown option or missing value: %s\n", a);
+    static const char *const with_value[] = {
+        "--out", "--runs", "--episodes", "--seed", "--threads", "--pop",
+        "--iters", "--tau", "--eval-tasks", "--plan-dt", "--d", "--replay"};
+    int known = 0;
+    for (size_t k = 0; k < sizeof(with_value) / sizeof(with_value[0]); k++)
+      known |= !strcmp(a, with_value[k]);
+    if (!known || i + 1 >= argc) {
+      fprintf(stderr, known ? PROG ": %s needs a value\n" : PROG ": unknown option: %s\n", a);
       usage(stderr);
       return 2;
     }
@@ -221,6 +236,7 @@ static int parse_args(int argc, char **argv, opts *o) {
     else if (!strcmp(a, "--eval-tasks")) rc = nd_parse_int(v, a, 1, MAX_EVAL, &neval, err, sizeof(err));
     else if (!strcmp(a, "--plan-dt")) rc = nd_parse_double(v, a, 1e-3, 0.02, &o->plan_dt, err, sizeof(err));
     else if (!strcmp(a, "--d")) rc = parse_dlist(v, o, err, sizeof(err));
+    else if (!strcmp(a, "--window")) rc = nd_parse_double(v, a, 0, 600, &o->window, err, sizeof(err));
     else if (!strcmp(a, "--replay")) {
       rc = 0;
       if (!strcmp(v, "setpoint")) o->mode = NDS_REPLAY_SETPOINT;
@@ -524,6 +540,23 @@ static int write_summary(const opts *o, ep_row *rows, const int *nrun, char *err
   return 0;
 }
 
+/* Run gnuplot plots.gp in dir, without a shell: the directory name reaches chdir(2) as it
+ * is, so no character of --out can act as shell syntax. Return gnuplot's exit status (127:
+ * it could not be started, 128 + N: killed by signal N), or -1 if fork failed. */
+static int run_gnuplot(const char *dir) {
+  fflush(NULL);  /* the child must not flush our buffered output a second time */
+  const pid_t pid = fork();
+  if (pid < 0) return -1;
+  if (pid == 0) {  /* only chdir and exec: locks the pool's threads held are not ours */
+    if (chdir(dir) == 0) execlp("gnuplot", "gnuplot", "plots.gp", (char *)NULL);
+    _exit(127);
+  }
+  int st;
+  while (waitpid(pid, &st, 0) < 0)
+    if (errno != EINTR) return -1;
+  return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
+}
+
 /* The figures: gnuplot reads the per-D data files. Column of metric m's mean in them: 2 +
  * 3 m (then min, max). Returns 0, or -1 if gnuplot failed or is missing (a warning). */
 static int write_plots(const opts *o, const int *nrun, char *err, int errlen) {
@@ -579,23 +612,7 @@ static int write_plots(const opts *o, const int *nrun, char *err, int errlen) {
     fputs("unset multiplot\n", f);
   }
   fclose(f);
-  char cmd[2600];
-  /* Run in the directory so the script's relative names work; quote the path for sh. */
-  char q[1300];
-  size_t j = 0;
-  q[j++] = '\'';
-  for (const char *p = o->out; *p && j < sizeof(q) - 6; p++) {
-    if (*p == '\'') {
-      memcpy(q + j, "'\\''", 4);
-      j += 4;
-    } else {
-      q[j++] = *p;
-    }
-  }
-  q[j++] = '\'';
-  q[j] = 0;
-  snprintf(cmd, sizeof(cmd), "cd %s && gnuplot plots.gp 2>&1", q);
-  int rc = system(cmd);
+  const int rc = run_gnuplot(o->out);
   if (rc != 0) {
     snprintf(err, errlen, "gnuplot failed or is missing (exit %d); the data and plots.gp are "
              "in %.300s", rc, o->out);
@@ -683,6 +700,7 @@ static int run_one(study *s, int di, int run, ep_row *rows, char *err, int errle
   nds_fit_cfg fc;
   nds_fit_cfg_default(&fc);
   fc.replay.mode = o->mode;
+  fc.replay.window = o->window;
   /* Seeds from D's value, not its place in --d: "--d 1" repeats the D = 1 runs of the
    * default "--d 0.2,1.0" exactly. */
   uint64_t dkey;
@@ -773,9 +791,10 @@ static void write_config(const opts *o, int argc, char **argv) {
   fprintf(f, "\nruns %d\nepisodes %d\nD", o->runs, o->episodes);
   for (int i = 0; i < o->nD; i++) fprintf(f, " %g", o->D[i]);
   fprintf(f, "\nseed %llu\nplanner N %d C %d, plan dt %g s\ntau %g s\neval tasks %d\n"
-             "refit Q 32 C 2, replay %s, world and refit dt 0.001 s\nthreads %d\n",
+             "refit Q 32 C 2, replay %s, window %g s, world and refit dt 0.001 s\n"
+             "threads %d\n",
           (unsigned long long)o->seed, o->pop, o->iters, o->plan_dt, o->tau, o->neval,
-          nds_replay_mode_name(o->mode), o->threads);
+          nds_replay_mode_name(o->mode), o->window, o->threads);
   fclose(f);
 }
 
@@ -1130,6 +1149,9 @@ int main(int argc, char **argv) {
   opts o;
   int rc = parse_args(argc, argv, &o);
   if (rc) return rc == 1 ? 0 : rc;
+  /* The results (CSVs, gnuplot's figures, the buffers) must not be world-writable, even
+   * under umask 0. */
+  nd_rfile_umask_no_world_write();
   char err[512];
   if (mkdir_p(o.out, err, sizeof(err))) {
     fprintf(stderr, PROG ": %s\n", err);

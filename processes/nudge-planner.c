@@ -138,15 +138,16 @@ typedef struct {
 /* Bookkeeping of one periodic input stream. */
 typedef struct {
   int have;       /* a valid message has arrived */
-  double t;       /* local arrival (handling) time of the newest, ndp_mono */
+  double t;       /* when the newest was sent (ndp_sent_mono), ndp_mono */
   int cap;        /* queue capacity of its subscription */
   int batch;      /* messages handled in the current drain */
   int behind;     /* the last drain filled the queue: newer messages may have been dropped */
 } input;
 
-static void input_got(input *in) {
+/* A message stamped utime arrived: its age counts from its sending (ndp_sent_mono). */
+static void input_got(input *in, int64_t utime) {
   in->have = 1;
-  in->t = ndp_mono();
+  in->t = ndp_sent_mono(utime);
   in->batch++;
   in->behind = 0;
 }
@@ -275,7 +276,7 @@ static void on_mocap(const lcm_recv_buf_t *rb, const char *ch, const nudge_mocap
     p->mocap_lost += m->seq - p->mocap.seq - 1;
   }
   p->mocap = *m;
-  input_got(&p->in_mocap);
+  input_got(&p->in_mocap, m->utime);
   mocap_frame *f = &p->hist[p->hist_head];
   f->utime = m->utime;
   f->x = m->obj_pos[0];
@@ -296,7 +297,7 @@ static void on_robot_state(const lcm_recv_buf_t *rb, const char *ch,
     return;
   }
   p->rs = *m;
-  input_got(&p->in_rs);
+  input_got(&p->in_rs, m->utime);
 }
 
 static void on_ee_cmd(const lcm_recv_buf_t *rb, const char *ch, const nudge_ee_cmd_t *m,
@@ -310,7 +311,7 @@ static void on_ee_cmd(const lcm_recv_buf_t *rb, const char *ch, const nudge_ee_c
     return;
   }
   p->cmd = *m;
-  input_got(&p->in_cmd);
+  input_got(&p->in_cmd, m->utime);
 }
 
 static void task_summary(proc *p, const char *how) {
@@ -422,8 +423,9 @@ static void on_params(const lcm_recv_buf_t *rb, const char *ch, const nudge_para
 
 /* 1 if a plan may start now: mocap and robot state fresh, and the setpoint not known to
  * be behind while the executor is live (its next message is a millisecond away).
- * Arrival times are those of handling, so input queued during a plan counts as fresh
- * for at most one plan's duration after its source went quiet. */
+ * Ages count from each message's sending, so input that queued up while this process
+ * was busy or stopped is as old as it is: after a stall the planner waits for new state
+ * instead of planning from what the socket kept (the oldest, once it overflowed). */
 static int state_fresh(const proc *p, double now) {
   const double to = p->o->state_timeout;
   return input_fresh(&p->in_mocap, now, to) && input_fresh(&p->in_rs, now, to) &&

@@ -516,16 +516,20 @@ static int pump(lcm_t *lcm, tasks_io *io, double dt, char *err, int errlen) {
   return 0;
 }
 
-/* Wait until a valid MOCAP frame arrives, up to wait s. 1 if one did, 0 if not (or
- * interrupted), -1 on an LCM failure. */
+/* Wait until a valid MOCAP frame arrives (and, when recording, a ROBOT_STATE: the first
+ * task's start state needs one), up to wait s. 1 if they did, 0 if not (or interrupted),
+ * -1 on an LCM failure. */
 static int wait_mocap(lcm_t *lcm, tasks_io *io, double wait, char *err, int errlen) {
   const double t_end = ndp_mono() + wait;
-  while (!io->frames && !ndp_quit) {
+  /* MOCAP alone would do for a runner started long after the bridge, but one started (or
+   * restarted) while both streams flow may see a MOCAP frame first and would begin its
+   * first task without a start state: that task would not be recorded. */
+  while ((!io->frames || (io->rec && !io->rec->have_rs)) && !ndp_quit) {
     const double left = t_end - ndp_mono();
     if (left <= 0.0) return 0;
     if (pump(lcm, io, fmin(left, 0.1), err, errlen)) return -1;
   }
-  return io->frames > 0;
+  return io->frames > 0 && (!io->rec || io->rec->have_rs);
 }
 
 /* Run goal g as task id: publish it, follow MOCAP to the terminal condition, publish the
@@ -654,7 +658,8 @@ static void usage(FILE *f) {
           "  --eps E             success threshold, default 1e-2 (per-goal values override)\n"
           "  --tau S             time limit per task, s, default 5 (per-goal values override)\n"
           "  --workspace M       goals beyond |x| or |y| > M are rejected, default 0.5 m\n"
-          "  --wait S            wait for the first MOCAP frame, default 10 s\n"
+          "  --wait S            wait for the first MOCAP frame (with --record: and\n"
+          "                      ROBOT_STATE), default 10 s\n"
           "  --settle S          pause between tasks so the object comes to rest, default 0.5 s\n"
           "  --record FILE       append each task's rollout (start state, 1 kHz forces,\n"
           "                      setpoints, observed path) to the replay buffer FILE, created\n"
@@ -732,6 +737,10 @@ static int parse_args(int argc, char **argv, tasks_cfg *c, char *err, int errlen
       rc = nd_parse_double(v, "--settle", 0.0, 3600.0, &c->settle, err, errlen);
     } else if (!strcmp(a, "--record")) {
       c->record = v;
+      if (!*v) {
+        snprintf(err, errlen, "--record: empty file name");
+        rc = -1;
+      }
     } else if (!strcmp(a, "--record-dt")) {
       rc = nd_parse_double(v, "--record-dt", 1e-5, 0.05, &c->record_dt, err, errlen);
     } else if (!strcmp(a, "--theta")) {
@@ -825,8 +834,8 @@ int main(int argc, char **argv) {
   }
   if (w == 0 && !ndp_quit) {
     fprintf(stderr,
-            PROG ": no MOCAP frame within %g s on %s: is nudge-bridge running on the same "
-            "LCM URL?\n", cfg.wait, url);
+            PROG ": no %s within %g s on %s: is nudge-bridge running on the same LCM URL?\n",
+            io.frames ? "ROBOT_STATE" : "MOCAP frame", cfg.wait, url);
     goto done;
   }
 

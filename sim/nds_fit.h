@@ -4,7 +4,7 @@
  * and summing the rollouts' L = L_pos,o + k1 L_pos,ee + k2 L_rot,o. The optimiser is the
  * project's nd_cem in its plain configuration: white Gaussian noise per parameter, no
  * elites kept, no population decay, no momentum, no injected mean; only a floor on the std
- * (std_floor, see nds_fit.c). Kept elites would carry costs measured on an older buffer
+ * (std_floor, rel_floor) and a std that follows the mean's steps (step_std; nds_fit.c). Kept elites would carry costs measured on an older buffer
  * into the next refit, and with C = 2 the extra evaluations buy little.
  *
  * The distribution persists between runs: create sets it to the prior (mu0, sigma0),
@@ -32,6 +32,8 @@ typedef struct {
   double lower;                /* every fitted parameter stays >= lower > 0 (samples clipped) */
   double std_floor;            /* std never falls below std_floor * sigma0 (0: the paper's
                                   plain CEM, which freezes after a run or two) */
+  double step_std;             /* nd_cem's step_std (the std follows the mean's steps; 0 off) */
+  double rel_floor;            /* each run starts with std >= rel_floor |mean| (0: off) */
   double k1, k2;               /* weights of L_pos,ee (1) and L_rot,o (m^2/rad) */
   int prune;                   /* 1: stop replaying a candidate once it cannot be an elite
                                   (same results, less work: see nds_fit.c); 0: replay all */
@@ -40,9 +42,10 @@ typedef struct {
 } nds_fit_cfg;
 
 /* Paper settings: Q 32, C 2, rho 0.2, fitting the three frictions with the mass held;
- * prior at nds_theta_true with the paper's D = 0.2 std; lower 1e-7; std_floor 0.5;
- * k1 = 1, k2 = 1e-3 m^2/rad (reasons in nds_fit.c); prune; SETPOINT replay with the
- * default controller (measured against FORCE in nds_fit.c); seed 1. */
+ * prior at nds_theta_true with the paper's D = 0.2 std; lower 1e-7; k1 = 1,
+ * k2 = 1e-3 m^2/rad; prune; seed 1. Beyond the paper (measured in nds_fit.c): step_std 2,
+ * std_floor 0.25, rel_floor 0.05, FORCE replay re-anchored every 0.1 s with the default
+ * controller. */
 void nds_fit_cfg_default(nds_fit_cfg *cfg);
 
 /* Check cfg. Return 0, or -1 naming the bad field. */

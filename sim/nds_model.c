@@ -314,7 +314,13 @@ void nds_model_free(nds_model *nm) {
 int nds_theta_parse(const char *s, const char *what, double theta[NDS_NTHETA], char *err,
                     int errlen) {
   if (nd_parse_list(s, what, NDS_NTHETA, 0.0, 1e4, theta, err, errlen)) return -1;
-  return nds_theta_check(theta, err, errlen);
+  /* The list's range admits a zero mass; the message must still name the option. */
+  char why[160];
+  if (nds_theta_check(theta, why, sizeof(why))) {
+    snprintf(err, errlen, "%s: %s", what, why);
+    return -1;
+  }
+  return 0;
 }
 
 int nds_theta_apply(nds_model *nm, const double theta[NDS_NTHETA], char *err, int errlen) {

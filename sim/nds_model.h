@@ -72,7 +72,7 @@ void nds_model_free(nds_model *nm);
 int nds_theta_check(const double theta[NDS_NTHETA], char *err, int errlen);
 
 /* Parse "S,T,R,M" (option what, e.g. "--theta") into theta and check it. Return 0, or -1
- * with a message. */
+ * with a message that starts with what. */
 int nds_theta_parse(const char *s, const char *what, double theta[NDS_NTHETA], char *err,
                     int errlen);
 

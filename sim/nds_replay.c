@@ -21,6 +21,7 @@
 void nds_replay_cfg_default(nds_replay_cfg *cfg, int mode) {
   cfg->mode = mode;
   nds_ctrl_cfg_default(&cfg->ctrl);
+  cfg->window = 0;
 }
 
 const char *nds_replay_mode_name(int mode) {
@@ -144,6 +145,51 @@ void nds_replay_start_put(nd_rollout *r, const nds_state *s) {
   memcpy(r->ee_vel, s->ee_vel, sizeof(s->ee_vel));
 }
 
+/* Observation i of r (object x, y, yaw; sphere x, y); i = -1: the initial state. */
+static void rec_obs(const nd_rollout *r, int i, double obj[3], double ee[2]) {
+  if (i < 0) {
+    obj[0] = r->obj_pos[0];
+    obj[1] = r->obj_pos[1];
+    obj[2] = nd_quat_yaw(r->obj_quat);
+    ee[0] = r->ee_pos[0];
+    ee[1] = r->ee_pos[1];
+    return;
+  }
+  memcpy(obj, r->obj + 3 * i, 3 * sizeof(double));
+  memcpy(ee, r->ee + 2 * i, 2 * sizeof(double));
+}
+
+/* Put observation i of r (and its rates from observation i - 1) into d: see re-anchoring
+ * in nds_replay.h. */
+static void reanchor(const nds_model *nm, mjData *d, const nd_rollout *r, int i) {
+  const mjModel *m = nm->m;
+  double o1[3], e1[2], o0[3], e0[2];
+  rec_obs(r, i, o1, e1);
+  rec_obs(r, i - 1, o0, e0);
+  const double rdt = 1 / r->dt;
+  mjtNum *q = d->qpos + nm->obj_qpos, *v = d->qvel + nm->obj_dof;
+  q[0] = o1[0];
+  q[1] = o1[1];
+  /* Turn the model's attitude about world z onto the observed yaw; its tilt stays. */
+  double dq[4], qn[4];
+  nd_yaw_quat(nd_wrap_angle(o1[2] - nd_quat_yaw(q + 3)), dq);
+  mju_mulQuat(qn, dq, q + 3);
+  mju_normalize4(qn);
+  mju_copy4(q + 3, qn);
+  v[0] = (o1[0] - o0[0]) * rdt;
+  v[1] = (o1[1] - o0[1]) * rdt;
+  /* A free joint's angular velocity is in the body frame: set its world z component. */
+  mjtNum R[9], w[3];
+  mju_quat2Mat(R, q + 3);
+  mju_rotVecMat(w, v + 3, R);
+  w[2] = nd_wrap_angle(o1[2] - o0[2]) * rdt;
+  mju_rotVecMatT(v + 3, w, R);
+  for (int a = 0; a < 2; a++) {
+    d->qpos[nm->ee_qpos[a]] = e1[a] - m->body_pos[3 * nm->ee_body + a] + m->qpos0[nm->ee_qpos[a]];
+    d->qvel[nm->ee_dof[a]] = (e1[a] - e0[a]) * rdt;
+  }
+}
+
 static void diverge(nds_replay_terms *out) {
   out->pos_o = out->pos_ee = out->rot_o = NDS_REPLAY_DIVERGED;
   out->diverged = 1;
@@ -159,6 +205,10 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
   const int mode = cfg->mode;
   if (mode != NDS_REPLAY_FORCE && mode != NDS_REPLAY_VELOCITY && mode != NDS_REPLAY_SETPOINT) {
     snprintf(err, errlen, "replay: unknown replay mode %d", mode);
+    return -1;
+  }
+  if (!(isfinite(cfg->window) && cfg->window >= 0)) {
+    snprintf(err, errlen, "replay: window = %g s, must be finite and >= 0", cfg->window);
     return -1;
   }
   /* A force taken for a velocity (or back) would replay nonsense that still scores. */
@@ -188,8 +238,11 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
   nds_ctrl pid;
   nds_ctrl_reset(&pid);
   const double mdt = m->opt.timestep;
+  /* Model steps per window; 0: never re-anchor. */
+  const long W = cfg->window > 0 ? lround(fmax(1, cfg->window / mdt)) : 0;
   for (; j < T && !diverged && !cut; j++) {
     const int base = j * k;
+    if (W && j > 0 && j % W == 0) reanchor(nm, d, r, base - 1);
     const double vel[2] = {d->qvel[dof0], d->qvel[dof1]};
     double f[2];
     if (mode == NDS_REPLAY_SETPOINT) {

@@ -43,9 +43,22 @@ enum { NDS_REPLAY_FORCE = 0, NDS_REPLAY_VELOCITY = 1, NDS_REPLAY_SETPOINT = 2 };
 typedef struct {
   int mode;            /* NDS_REPLAY_* */
   nds_ctrl_cfg ctrl;   /* the robot's controller: VELOCITY uses kv, SETPOINT the PID */
+  double window;       /* s; > 0: re-anchor every window (below); 0: one shot from the
+                          initial state, the paper's replay */
 } nds_replay_cfg;
 
-/* mode with the default controller (nds_ctrl_cfg_default). */
+/* Re-anchoring (multiple shooting). With window > 0, every window seconds of model time
+ * the replay puts what was observed back into the model: the object's x, y, yaw and their
+ * rates, the sphere's x, y and velocity (rates as backward differences of the observations
+ * one record step apart, which is the velocity an Euler step leaves); the object's height,
+ * tilt and their rates and the controller's integral stay the model's own. Each window
+ * then scores how far the model strays in window seconds from a state that really
+ * happened, so an error does not compound over the rollout: a contact that starts or ends
+ * a little earlier under a candidate theta (a discontinuity of the one-shot replay, which
+ * makes its loss flat-then-rough near the truth) costs only within its window. At the
+ * recording theta the replay stays exact up to rounding and the tilt's effect on yaw. */
+
+/* mode with the default controller (nds_ctrl_cfg_default), no re-anchoring. */
 void nds_replay_cfg_default(nds_replay_cfg *cfg, int mode);
 
 /* "force", "velocity", "setpoint"; "?" for an unknown mode. */

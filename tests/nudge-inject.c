@@ -197,7 +197,9 @@ static void inject_robot_state(inj *j) {
 }
 
 static void inject_ee_cmd(inj *j) {
-  const nudge_ee_cmd_t ok = {wall_us(), 1, 1, 0, {-0.1, 0, 0.05}, {0, 0, 0}, {0, 0, 0}};
+  const int64_t now = wall_us();
+  const nudge_ee_cmd_t ok = {.utime = now, .seq = 1, .plan_id = 1, .plan_utime = now - 1000,
+                             .mode = 0, .p = {-0.1, 0, 0.05}};
   nudge_ee_cmd_t m;
 #define CMD_BAD(stmt)                                                   \
   do {                                                                  \
@@ -215,6 +217,7 @@ static void inject_ee_cmd(inj *j) {
   CMD_BAD(m.a[1] = 1e9);
   CMD_BAD(m.mode = 7);
   CMD_BAD(m.mode = -1);
+  CMD_BAD(m.plan_utime = -1);
 #undef CMD_BAD
   if (j->o->garbage) {
     m = ok;
@@ -357,6 +360,19 @@ static void inject_status(inj *j) {
     const int len = nudge_status_t_encode(j->buf, 0, MAX_MSG, &m);
     send_bad_strings(j, len, 16, (int)sizeof name);
     send_bad_strings(j, len, 16 + 4 + (int)sizeof name + 4, (int)sizeof state);
+    /* Well-formed, but a name that would drive a terminal (clear screen, red), and one
+     * longer than any process name: a viewer must print neither. */
+    char esc[] = "nudge-\x1b[2J\x1b[31mhijacked", longname[200];
+    memset(longname, 'n', sizeof longname - 1);
+    longname[sizeof longname - 1] = 0;
+    char *names[2] = {esc, longname};
+    for (int k = 0; k < 2; k++) {
+      m.name = names[k];
+      const int l = nudge_status_t_encode(j->buf, 0, MAX_MSG, &m);
+      if (l > 0) send_raw(j, j->buf, l, 0);
+      else j->failed = 1;
+    }
+    m.name = name;
   }
 }
 

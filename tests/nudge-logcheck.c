@@ -1,5 +1,6 @@
-/* nudge-logcheck: figures and checks from an lcm-logger log of a nudge run, for the
- * process tests (a test helper, not installed).
+/* nudge-logcheck: figures and checks from an lcm-logger log of a nudge run, and from its
+ * replay buffer and parameter history files, for the process tests (a test helper, not
+ * installed).
  *
  * Reads the log with LCM's eventlog API, decodes the nudge channels with the generated
  * decoders (strings through ndp's safe decoders: a log of a bad-input test holds lying
@@ -19,6 +20,7 @@
 #include "nd_parse.h"
 #include "nd_rbuf.h"
 #include "ndp.h"
+#include "ndp_history.h"
 #include "ndp_validate.h"
 
 #define PROG "nudge-logcheck"
@@ -27,6 +29,11 @@
 typedef struct {
   const char *cmd, *log;
   const char *arg;         /* status: process name; last: channel */
+  const char *committed;   /* buffer: file of committed task ids */
+  const char *buffer;      /* history: the replay buffer it was fitted on */
+  int allow_torn;          /* buffer, history: a torn tail is no failure */
+  double timeout;          /* stale-cmds: the executor's plan timeout, s */
+  double slack_ms;         /* stale-cmds: allowance on it */
   /* checks, negative = not asked for */
   int min_start, min_success, min_end;
   int first_success;
@@ -511,30 +518,401 @@ static int cmd_live(const lc_opts *o) {
   return 0;
 }
 
-/* ---- buffer: the replay buffer file, not a log ------------------------------------- */
+/* ---- stale-cmds: did any setpoint move on a stale plan? ----------------------------- */
 
-/* Every record of the replay buffer o->log, decoded as a rollout: how many, where the
- * valid ones end and why. Fails when the file cannot be read, a record does not decode,
- * or the valid records do not reach the end of the file. */
+typedef struct {
+  int64_t utime, state_utime;
+  double T;
+} plan_ref;
+
+typedef struct {
+  plan_ref *p;
+  int n, cap;
+  int oom;
+} plan_set;
+
+static void plans_visit(const lcm_eventlog_event_t *ev, void *user) {
+  plan_set *s = user;
+  nudge_plan_t m;
+  char why[160];
+  if (nudge_plan_t_decode(ev->data, 0, ev->datalen, &m) < 0 || ndp_check_plan(&m, why, sizeof why))
+    return;
+  if (s->n == s->cap) {
+    const int cap = s->cap ? 2 * s->cap : 4096;
+    plan_ref *g = realloc(s->p, sizeof(*g) * cap);
+    if (!g) {
+      s->oom = 1;
+      return;
+    }
+    s->p = g;
+    s->cap = cap;
+  }
+  s->p[s->n].utime = m.utime;
+  s->p[s->n].state_utime = m.state_utime;
+  s->p[s->n].T = m.T;
+  s->n++;
+}
+
+static int cmp_plan(const void *a, const void *b) {
+  const int64_t x = ((const plan_ref *)a)->utime, y = ((const plan_ref *)b)->utime;
+  return x < y ? -1 : x > y;
+}
+
+typedef struct {
+  const lc_opts *o;
+  const plan_set *plans;
+  int64_t tracking, stale, no_plan, plans_used, unmatched, stale_state;
+  int64_t last_ref;              /* plan_utime of the previous tracking setpoint */
+  const plan_ref *ref;           /* its PLAN in the log, NULL if not there */
+  double age_max_ms, state_age_max_ms;
+  int64_t first_stale_utime;
+} stale_acc;
+
+static void stale_visit(const lcm_eventlog_event_t *ev, void *user) {
+  stale_acc *a = user;
+  nudge_ee_cmd_t m;
+  char why[160];
+  if (nudge_ee_cmd_t_decode(ev->data, 0, ev->datalen, &m) < 0 ||
+      ndp_check_ee_cmd(&m, why, sizeof why))
+    return;
+  /* Braking and holding are what a stale plan must lead to; only tracking moves on a plan. */
+  if (m.mode != NUDGE_EE_CMD_T_MODE_TRACKING) return;
+  a->tracking++;
+  if (m.plan_utime <= 0) {
+    a->no_plan++;
+    a->stale++;
+    if (!a->first_stale_utime) a->first_stale_utime = m.utime;
+    return;
+  }
+  if (m.plan_utime != a->last_ref) {
+    a->last_ref = m.plan_utime;
+    a->plans_used++;
+    const plan_ref key = {m.plan_utime, 0, 0.0};
+    a->ref = bsearch(&key, a->plans->p, a->plans->n, sizeof key, cmp_plan);
+    if (!a->ref) a->unmatched++;
+  }
+  const double age_ms = 1e-3 * (double)(m.utime - m.plan_utime);
+  if (age_ms > a->age_max_ms) a->age_max_ms = age_ms;
+  if (age_ms > 1e3 * a->o->timeout + a->o->slack_ms) {
+    a->stale++;
+    if (!a->first_stale_utime) a->first_stale_utime = m.utime;
+  }
+  if (a->ref) {
+    /* The executor refuses a plan whose state is older than its segment T on arrival and
+     * follows it for the timeout at most: older than that, it moved on a state it had
+     * left (a planner that stalled mid-plan, or planned on input it handled late). */
+    const double st_ms = 1e-3 * (double)(m.utime - a->ref->state_utime);
+    if (st_ms > a->state_age_max_ms) a->state_age_max_ms = st_ms;
+    if (st_ms > 1e3 * (a->ref->T + a->o->timeout) + a->o->slack_ms) a->stale_state++;
+  }
+}
+
+static int cmd_stale_cmds(const lc_opts *o) {
+  plan_set plans = {NULL, 0, 0, 0};
+  if (for_each(o->log, NDP_CH_PLAN, plans_visit, &plans)) return 1;
+  if (plans.oom) {
+    fprintf(stderr, PROG ": out of memory for the PLAN messages\n");
+    free(plans.p);
+    return 1;
+  }
+  qsort(plans.p, plans.n, sizeof *plans.p, cmp_plan);
+  stale_acc a;
+  memset(&a, 0, sizeof a);
+  a.o = o;
+  a.plans = &plans;
+  const int rc = for_each(o->log, NDP_CH_EE_CMD, stale_visit, &a);
+  free(plans.p);
+  if (rc) return 1;
+  printf("plans_logged %d count\n", plans.n);
+  printf("tracking_commands %lld count\n", (long long)a.tracking);
+  printf("tracking_plans %lld count\n", (long long)a.plans_used);
+  printf("tracking_plans_not_logged %lld count\n", (long long)a.unmatched);
+  printf("tracking_without_plan %lld count\n", (long long)a.no_plan);
+  printf("plan_age_max %.3f ms\n", a.age_max_ms);
+  printf("plan_state_age_max %.3f ms\n", a.state_age_max_ms);
+  printf("stale_commands %lld count\n", (long long)a.stale);
+  printf("stale_state_commands %lld count\n", (long long)a.stale_state);
+  if (a.stale) printf("first_stale_utime %lld us\n", (long long)a.first_stale_utime);
+  if (a.stale)
+    fail("%lld tracking setpoints on a plan older than %g s + %g ms (oldest %.1f ms)",
+         (long long)a.stale, o->timeout, o->slack_ms, a.age_max_ms);
+  if (a.stale_state)
+    fail("%lld tracking setpoints on a plan made from a state older than its T + %g s + "
+         "%g ms (oldest %.1f ms)", (long long)a.stale_state, o->timeout, o->slack_ms,
+         a.state_age_max_ms);
+  return 0;
+}
+
+/* ---- first-beats: when each process instance was first heard ------------------------ */
+
+#define MAX_BEATS 4096
+
+typedef struct {
+  char name[64];
+  int32_t pid;
+  int64_t first, last;
+} beat;
+
+typedef struct {
+  beat b[MAX_BEATS];
+  int n, full;
+} beat_acc;
+
+static void beats_visit(const lcm_eventlog_event_t *ev, void *user) {
+  beat_acc *a = user;
+  nudge_status_t m;
+  char why[160];
+  if (ndp_decode_status(ev->data, ev->datalen, &m, why, sizeof why)) return;
+  if (m.utime > 0 && m.pid > 0 && m.name[0]) {
+    int i = 0;
+    while (i < a->n && !(a->b[i].pid == m.pid && !strcmp(a->b[i].name, m.name))) i++;
+    if (i == a->n) {
+      if (a->n == MAX_BEATS) {
+        a->full = 1;
+      } else {
+        snprintf(a->b[i].name, sizeof a->b[i].name, "%s", m.name);
+        a->b[i].pid = m.pid;
+        a->b[i].first = a->b[i].last = m.utime;
+        a->n++;
+      }
+    } else {
+      if (m.utime < a->b[i].first) a->b[i].first = m.utime;
+      if (m.utime > a->b[i].last) a->b[i].last = m.utime;
+    }
+  }
+  nudge_status_t_decode_cleanup(&m);
+}
+
+static int cmd_first_beats(const lc_opts *o) {
+  static beat_acc a;
+  memset(&a, 0, sizeof a);
+  if (for_each(o->log, NDP_CH_STATUS, beats_visit, &a)) return 1;
+  for (int i = 0; i < a.n; i++)
+    printf("first_beat.%s.%d %lld us\n", a.b[i].name, a.b[i].pid, (long long)a.b[i].first);
+  printf("beat_instances %d count\n", a.n);
+  if (a.full) fail("more than %d process instances: the rest are not listed", MAX_BEATS);
+  return 0;
+}
+
+/* ---- buffer: the replay buffer against what the recorder committed ------------------ */
+
+static int cmp_i64(const void *a, const void *b) {
+  const int64_t x = *(const int64_t *)a, y = *(const int64_t *)b;
+  return x < y ? -1 : x > y;
+}
+
+/* Task ids from path, one per line, into a sorted malloc'd array. -1 on error. */
+static int load_ids(const char *path, int64_t **out, int *n) {
+  FILE *f = fopen(path, "r");
+  if (!f) {
+    fprintf(stderr, PROG ": cannot open %s\n", path);
+    return -1;
+  }
+  int64_t *ids = NULL;
+  int cap = 0, k = 0, rc = 0;
+  char line[128], err[200];
+  while (fgets(line, sizeof line, f)) {
+    line[strcspn(line, "\r\n")] = '\0';
+    if (!line[0]) continue;
+    uint64_t v;
+    if (nd_parse_u64(line, path, &v, err, sizeof err) || v > (uint64_t)INT64_MAX) {
+      fprintf(stderr, PROG ": %s: '%s' is not a task id\n", path, line);
+      rc = -1;
+      break;
+    }
+    if (k == cap) {
+      cap = cap ? 2 * cap : 256;
+      int64_t *g = realloc(ids, sizeof(*g) * cap);
+      if (!g) {
+        rc = -1;
+        break;
+      }
+      ids = g;
+    }
+    ids[k++] = (int64_t)v;
+  }
+  fclose(f);
+  if (rc) {
+    free(ids);
+    return -1;
+  }
+  if (k) qsort(ids, k, sizeof *ids, cmp_i64);
+  *out = ids;
+  *n = k;
+  return 0;
+}
+
 static int cmd_buffer(const lc_opts *o) {
-  nd_rollout *rs = NULL;
-  int n = 0;
-  nd_rfile_tail t;
+  int64_t *committed = NULL, *found = NULL;
+  int ncommitted = 0, nfound = 0, cap = 0, rc = 1;
+  if (o->committed && load_ids(o->committed, &committed, &ncommitted)) return 1;
+  nd_rfile_reader rd;
   char err[512];
-  if (nd_rbuf_read_all(o->log, &rs, &n, &t, err, sizeof err)) {
+  if (nd_rbuf_reader_open(&rd, o->log, err, sizeof err)) {
+    fprintf(stderr, PROG ": %s\n", err);
+    free(committed);
+    return 1;
+  }
+  int64_t undecodable = 0;
+  nd_rfile_tail tail;
+  for (;;) {
+    nd_rollout r;
+    const int64_t at = rd.offset;
+    const int k = nd_rbuf_next(&rd, &r, &tail, err, sizeof err);
+    if (k == 0) break;
+    if (k < 0) {
+      if (rd.offset == at) {
+        fprintf(stderr, PROG ": %s\n", err);
+        goto out;
+      }
+      /* A sound frame that is no rollout: written by no recorder of ours. */
+      fprintf(stderr, PROG ": %s\n", err);
+      undecodable++;
+      continue;
+    }
+    if (nfound == cap) {
+      cap = cap ? 2 * cap : 256;
+      int64_t *g = realloc(found, sizeof(*g) * cap);
+      if (!g) {
+        nd_rollout_free(&r);
+        goto out;
+      }
+      found = g;
+    }
+    found[nfound++] = r.task_id;
+    nd_rollout_free(&r);
+  }
+  const int corrupt = (int)undecodable + (tail.status == ND_RFILE_CORRUPT);
+  const int torn = tail.status == ND_RFILE_TORN;
+  printf("buffer_created %lld us\n", (long long)rd.created_us);
+  printf("records_in_file %d count\n", nfound);
+  printf("records_corrupt %d count\n", corrupt);
+  printf("buffer_tail_torn %d count\n", torn);
+  if (tail.status != ND_RFILE_END) fprintf(stderr, PROG ": %s: %s\n", o->log, tail.why);
+  if (nfound) qsort(found, nfound, sizeof *found, cmp_i64);
+  int dup = 0;
+  for (int i = 1; i < nfound; i++) dup += found[i] == found[i - 1];
+  printf("records_duplicate %d count\n", dup);
+  if (o->committed) {
+    int missing = 0, dup_c = 0, extra = 0;
+    for (int i = 0; i < ncommitted; i++) {
+      if (i && committed[i] == committed[i - 1]) {
+        dup_c++;
+        continue;
+      }
+      if (!bsearch(&committed[i], found, nfound, sizeof *found, cmp_i64)) {
+        if (missing++ < 10)
+          fprintf(stderr, PROG ": committed task %lld is not in %s\n", (long long)committed[i],
+                  o->log);
+      }
+    }
+    for (int i = 0; i < nfound; i++)
+      if (!bsearch(&found[i], committed, ncommitted, sizeof *found, cmp_i64)) extra++;
+    printf("records_committed %d count\n", ncommitted - dup_c);
+    printf("records_missing %d count\n", missing);
+    /* A recorder killed between its commit and its report: in the file, never said. */
+    printf("records_unreported %d count\n", extra);
+    if (missing) fail("%d committed records are missing from %s", missing, o->log);
+    if (dup_c) fail("%d task ids reported committed twice", dup_c);
+  }
+  if (corrupt) fail("%s: %d corrupt record(s)", o->log, corrupt);
+  if (torn && !o->allow_torn) fail("%s ends in a torn record", o->log);
+  if (dup) fail("%d records appear twice in %s", dup, o->log);
+  rc = 0;
+out:
+  nd_rfile_reader_close(&rd);
+  free(committed);
+  free(found);
+  return rc;
+}
+
+/* ---- history: the adapter's parameter history, entry by entry ----------------------- */
+
+static int cmd_history(const lc_opts *o) {
+  char err[512];
+  int64_t buf_created = -1, buf_records = -1;
+  if (o->buffer) {
+    nd_rfile_reader rb;
+    if (nd_rbuf_reader_open(&rb, o->buffer, err, sizeof err)) {
+      fprintf(stderr, PROG ": %s\n", err);
+      return 1;
+    }
+    buf_created = rb.created_us;
+    nd_rfile_record rec;
+    int k;
+    while ((k = nd_rfile_next(&rb, &rec, NULL, err, sizeof err)) == 1) {
+    }
+    buf_records = rb.records;
+    nd_rfile_reader_close(&rb);
+    if (k < 0) {
+      fprintf(stderr, PROG ": %s\n", err);
+      return 1;
+    }
+  }
+  nd_rfile_reader rd;
+  if (nd_rfile_reader_open(&rd, o->log, ND_RFILE_KIND_PARAMS, err, sizeof err)) {
     fprintf(stderr, PROG ": %s\n", err);
     return 1;
   }
-  int64_t steps = 0;
-  for (int i = 0; i < n; i++) steps += rs[i].n;
-  nd_rbuf_free_all(rs, n);
-  printf("buffer_records %d count\n", n);
-  printf("buffer_steps %lld count\n", (long long)steps);
-  printf("buffer_valid_bytes %lld bytes\n", (long long)t.offset);
-  printf("buffer_file_bytes %lld bytes\n", (long long)t.size);
-  if (t.status != ND_RFILE_END)
-    fail("%s: valid records end at offset %lld of %lld: %s (%s)", o->log, (long long)t.offset,
-         (long long)t.size, t.why, nd_rfile_status_name(t.status));
+  int64_t entries = 0, bad = 0, backwards = 0, gaps = 0, shrinks = 0, other = 0, over = 0;
+  int64_t first = 0, last = 0, size_max = 0;
+  int32_t prev_size = 0;
+  nd_rfile_tail tail;
+  int k;
+  for (;;) {
+    nd_rfile_record rec;
+    k = nd_rfile_next(&rd, &rec, &tail, err, sizeof err);
+    if (k <= 0) break;
+    ndp_history_entry e;
+    char why[200];
+    if (rec.kind != ND_RFILE_KIND_PARAMS || ndp_history_decode(&e, rec.data, rec.len, why, sizeof why)) {
+      if (bad++ < 5)
+        fprintf(stderr, PROG ": %s: bad entry at offset %lld\n", o->log, (long long)rec.offset);
+      continue;
+    }
+    if (entries == 0) {
+      first = e.version;
+    } else {
+      if (e.version <= last) backwards++;
+      else if (e.version != last + 1) gaps++;
+      if (e.buffer_size < prev_size) shrinks++;
+    }
+    if (o->buffer && e.buffer_created != buf_created) other++;
+    if (o->buffer && e.buffer_size > buf_records) over++;
+    if (e.buffer_size > size_max) size_max = e.buffer_size;
+    last = e.version;
+    prev_size = e.buffer_size;
+    entries++;
+  }
+  nd_rfile_reader_close(&rd);
+  if (k < 0) {
+    fprintf(stderr, PROG ": %s\n", err);
+    return 1;
+  }
+  const int corrupt = (int)bad + (tail.status == ND_RFILE_CORRUPT);
+  printf("history_entries %lld count\n", (long long)entries);
+  printf("history_corrupt %d count\n", corrupt);
+  printf("history_tail_torn %d count\n", tail.status == ND_RFILE_TORN);
+  printf("history_version_first %lld -\n", (long long)first);
+  printf("history_version_last %lld -\n", (long long)last);
+  printf("history_version_backwards %lld count\n", (long long)backwards);
+  printf("history_version_gaps %lld count\n", (long long)gaps);
+  printf("history_size_shrinks %lld count\n", (long long)shrinks);
+  printf("history_size_max %lld count\n", (long long)size_max);
+  if (tail.status != ND_RFILE_END) fprintf(stderr, PROG ": %s: %s\n", o->log, tail.why);
+  if (o->buffer) {
+    printf("history_other_buffer %lld count\n", (long long)other);
+    printf("history_beyond_buffer %lld count\n", (long long)over);
+    if (other) fail("%lld entries were fitted on another buffer than %s", (long long)other, o->buffer);
+    if (over)
+      fail("%lld entries were fitted on more rollouts than %s holds (%lld)", (long long)over,
+           o->buffer, (long long)buf_records);
+  }
+  if (corrupt) fail("%s: %d corrupt entr%s", o->log, corrupt, corrupt == 1 ? "y" : "ies");
+  if (tail.status == ND_RFILE_TORN && !o->allow_torn) fail("%s ends in a torn entry", o->log);
+  if (backwards) fail("versions went backwards %lld times", (long long)backwards);
+  if (gaps) fail("versions skipped %lld times (a fit not kept)", (long long)gaps);
+  if (shrinks) fail("the buffer size fitted on shrank %lld times", (long long)shrinks);
   return 0;
 }
 
@@ -544,8 +922,9 @@ static void usage(FILE *f) {
   const nd_exec_cfg d = nd_exec_cfg_default();
   fprintf(f,
           "usage: " PROG " COMMAND LOG [ARG] [options]\n"
-          "Figures and checks from an lcm-logger log of a nudge run, as 'name value unit'\n"
-          "lines. Exit 1 when an asked-for check fails (named on stderr), 2 on bad usage.\n\n"
+          "Figures and checks from an lcm-logger log of a nudge run (or its replay buffer\n"
+          "and parameter history), as 'name value unit' lines. Exit 1 when an asked-for\n"
+          "check fails (named on stderr), 2 on bad usage.\n\n"
           "  episodes LOG     counts of EPISODE start/success/timeout/rejected, each task's end\n"
           "      --min-start N, --min-success N, --min-end N, --first-success\n"
           "  ee-cmd LOG       EE_CMD count, gaps (between setpoints sent one after the\n"
@@ -568,8 +947,22 @@ static void usage(FILE *f) {
           "      --before-utime U (last before U), --after-utime U (first after U), --pid P\n"
           "  live LOG         plans so far, newest setpoint's speed and mode\n"
           "      --min-plans N, --min-speed S (and tracking)\n"
-          "  buffer FILE      a replay buffer (not a log): records, steps, valid bytes;\n"
-          "                   fails unless every record decodes and they reach the end\n",
+          "  stale-cmds LOG --timeout S   every TRACKING setpoint must follow a plan at most\n"
+          "                   S (+ slack) old (EE_CMD.utime - plan_utime), made from a state\n"
+          "                   at most the plan's T + S (+ slack) old (if the PLAN is in the\n"
+          "                   log); fails if one does not, or tracks with no plan\n"
+          "      --slack-ms M       allowance on S (default 2: the loop's period and clocks)\n"
+          "  first-beats LOG  'first_beat.NAME.PID UTIME us' for every process instance\n"
+          "  buffer FILE      records of a replay buffer (core reader): count, corrupt, torn\n"
+          "                   tail, duplicates; fails on corrupt, duplicate or torn\n"
+          "      --committed IDS    task ids the recorder reported committed, one a line:\n"
+          "                         fails if one is not in FILE\n"
+          "      --allow-torn       a torn last record is no failure (writer killed mid-append)\n"
+          "  history FILE     the adapter's parameter history entry by entry: fails on a\n"
+          "                   corrupt entry, versions not +1 each, a shrinking fitted size\n"
+          "      --buffer BUF       and on entries fitted on another buffer or on more\n"
+          "                         rollouts than BUF holds\n"
+          "      --allow-torn       as for buffer\n",
           d.v_max, d.a_max, d.j_max);
 }
 
@@ -596,6 +989,7 @@ static int parse_args(int argc, char **argv, lc_opts *o) {
   o->min_start = o->min_success = o->min_end = o->min_plans = -1;
   o->max_gap_ms = o->max_ms = o->min_speed = -1.0;
   o->slack_us = 50.0;
+  o->slack_ms = 2.0;
   o->lim = nd_exec_cfg_default();
   if (argc >= 2 && (!strcmp(argv[1], "-h") || !strcmp(argv[1], "--help"))) {
     usage(stdout);
@@ -607,7 +1001,8 @@ static int parse_args(int argc, char **argv, lc_opts *o) {
   int i = 3;
   const int needs_arg = !strcmp(o->cmd, "status") || !strcmp(o->cmd, "last");
   if (strcmp(o->cmd, "episodes") && strcmp(o->cmd, "ee-cmd") && strcmp(o->cmd, "stop-after") &&
-      strcmp(o->cmd, "live") && strcmp(o->cmd, "buffer") && !needs_arg) {
+      strcmp(o->cmd, "live") && strcmp(o->cmd, "stale-cmds") && strcmp(o->cmd, "first-beats") &&
+      strcmp(o->cmd, "buffer") && strcmp(o->cmd, "history") && !needs_arg) {
     snprintf(err, sizeof err, "unknown command '%s'", o->cmd);
     return bad_arg(err);
   }
@@ -619,6 +1014,10 @@ static int parse_args(int argc, char **argv, lc_opts *o) {
     const char *a = argv[i];
     if (!strcmp(a, "--first-success")) {
       o->first_success = 1;
+      continue;
+    }
+    if (!strcmp(a, "--allow-torn")) {
+      o->allow_torn = 1;
       continue;
     }
     if (i + 1 >= argc) {
@@ -634,6 +1033,10 @@ static int parse_args(int argc, char **argv, lc_opts *o) {
     else if (!strcmp(a, "--max-gap-ms")) rc = nd_parse_double(v, a, 0.0, 1e6, &o->max_gap_ms, err, sizeof err);
     else if (!strcmp(a, "--max-ms")) rc = nd_parse_double(v, a, 0.0, 1e7, &o->max_ms, err, sizeof err);
     else if (!strcmp(a, "--min-speed")) rc = nd_parse_double(v, a, 0.0, 100.0, &o->min_speed, err, sizeof err);
+    else if (!strcmp(a, "--timeout")) rc = nd_parse_double(v, a, 1e-4, 60.0, &o->timeout, err, sizeof err);
+    else if (!strcmp(a, "--slack-ms")) rc = nd_parse_double(v, a, 0.0, 1e4, &o->slack_ms, err, sizeof err);
+    else if (!strcmp(a, "--committed")) o->committed = v;
+    else if (!strcmp(a, "--buffer")) o->buffer = v;
     else if (!strcmp(a, "--slack-us")) rc = nd_parse_double(v, a, 0.0, 1e6, &o->slack_us, err, sizeof err);
     else if (!strcmp(a, "--v-max")) rc = nd_parse_double(v, a, 1e-6, 1e3, &o->lim.v_max, err, sizeof err);
     else if (!strcmp(a, "--a-max")) rc = nd_parse_double(v, a, 1e-6, 1e6, &o->lim.a_max, err, sizeof err);
@@ -654,6 +1057,8 @@ static int parse_args(int argc, char **argv, lc_opts *o) {
     if (rc) return bad_arg(err);
   }
   if (!strcmp(o->cmd, "stop-after") && !o->t0) return bad_arg("stop-after needs --t0-utime");
+  if (!strcmp(o->cmd, "stale-cmds") && !(o->timeout > 0.0))
+    return bad_arg("stale-cmds needs --timeout (the executor's)");
   if (o->before && o->after && !strcmp(o->cmd, "status"))
     return bad_arg("status: --before-utime and --after-utime exclude each other");
   return -1;
@@ -669,7 +1074,10 @@ int main(int argc, char **argv) {
   else if (!strcmp(o.cmd, "stop-after")) rc = cmd_stop_after(&o);
   else if (!strcmp(o.cmd, "last")) rc = cmd_last(&o);
   else if (!strcmp(o.cmd, "status")) rc = cmd_status(&o);
+  else if (!strcmp(o.cmd, "stale-cmds")) rc = cmd_stale_cmds(&o);
+  else if (!strcmp(o.cmd, "first-beats")) rc = cmd_first_beats(&o);
   else if (!strcmp(o.cmd, "buffer")) rc = cmd_buffer(&o);
+  else if (!strcmp(o.cmd, "history")) rc = cmd_history(&o);
   else rc = cmd_live(&o);
   return rc ? rc : failures ? 1 : 0;
 }

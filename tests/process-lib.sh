@@ -5,12 +5,17 @@
 # through pt_spawn, so the EXIT trap can stop it; every wait has a deadline, so a test
 # ends by itself. Assertions print "ok - ..." or "FAIL - ..." and the test exits 1 if any
 # failed; figures are printed as 'name value unit' lines.
+#
+# Every test also fails on a sanitizer report in any log under its work directory (see
+# pt_sanitizer_scan), and waits for things to happen scale with NUDGE_SLOW (pt_slow).
+# PT_KEEP=1 (or ND_KEEP=1) keeps the work directory (logs, recordings) instead of
+# removing it.
 
 PT_NAME=${PT_NAME:-process-test}
 PT_FAILS=0
 PT_PIDS=()          # everything started, for the EXIT trap
 PT_LOGGER=""
-PT_ON_CLEANUP=()    # commands run at exit after the processes stop, before PT_WORK goes
+PT_ON_CLEANUP=()    # functions called at exit after the processes stop, before PT_WORK goes
 
 pt_say() { printf '%s: %s\n' "$PT_NAME" "$*"; }
 
@@ -28,15 +33,56 @@ pt_check() {
   if "$@"; then pt_ok "$what"; else pt_fail "$what"; fi
 }
 
-# pt_on_cleanup CMD: run CMD (a string, eval'd) at exit, after everything started has
-# stopped and before the work directory is removed: e.g. unmount what the test mounted
-# there, which rm -rf cannot remove.
+# pt_on_cleanup FUNCTION: call FUNCTION (a name, no arguments) at exit, after everything
+# started has stopped and before the work directory is removed: e.g. unmount what the test
+# mounted there, which rm -rf cannot remove. A function, not a string to eval, so no path
+# is pasted into shell code.
 pt_on_cleanup() { PT_ON_CLEANUP+=("$1"); }
+
+# pt_check_not DESCRIPTION COMMAND...: ok if COMMAND fails. (Instead of bash -c "! ...":
+# no path or value is ever pasted into a string a shell parses again.)
+pt_check_not() {
+  local what=$1
+  shift
+  if "$@"; then pt_fail "$what"; else pt_ok "$what"; fi
+}
 
 # A figure line, also kept in $PT_WORK/figures.
 pt_figure() { printf '%s %s %s\n' "$1" "$2" "$3" | tee -a "$PT_WORK/figures"; }
 
 pt_now_us() { local t=$EPOCHREALTIME; printf '%s' "${t/[.,]/}"; }
+
+# NUDGE_SLOW=N (an integer >= 1, default 1): the programs run N times slower than a
+# Release build, e.g. under the sanitizers. Deadlines for something to happen (start-up,
+# a task, a stop) and time limits given to the programs are multiplied by it; what a test
+# asserts about the system's own timing (loop gaps, the executor's brake) is not.
+PT_SLOW=${NUDGE_SLOW:-1}
+if [[ ! $PT_SLOW =~ ^[1-9][0-9]?$ ]]; then
+  echo "process-lib: NUDGE_SLOW must be an integer from 1 to 99, got '$PT_SLOW'" >&2
+  exit 2
+fi
+
+# pt_slow SECONDS: SECONDS scaled by NUDGE_SLOW (integers or decimals, e.g. 0.1).
+pt_slow() { awk -v s="$1" -v k="$PT_SLOW" 'BEGIN { print s * k }'; }
+
+# What a sanitizer writes when it finds something: an ASan error (also its SEGV report),
+# UBSan's "runtime error:", any LeakSanitizer report or failure.
+PT_SANITIZER_RE='ERROR: AddressSanitizer|runtime error:|LeakSanitizer'
+
+# pt_sanitizer_scan DIR: fail for every log (*.log, *.out, *.err under DIR) that holds a
+# sanitizer report, and show its first lines. A process that dies of one is restarted by
+# the supervisor, and a leak report comes only as a process exits, so neither would fail
+# a test by itself. Return 1 if any was found.
+pt_sanitizer_scan() {
+  local f found=0
+  while IFS= read -r -d '' f; do
+    grep -aqE "$PT_SANITIZER_RE" "$f" || continue
+    found=1
+    pt_fail "sanitizer report in ${f#"$1"/}:"
+    grep -anE -A 12 "$PT_SANITIZER_RE" "$f" | head -n 40
+  done < <(find "$1" -type f \( -name '*.log' -o -name '*.out' -o -name '*.err' \) -print0)
+  return $found
+}
 
 # pt_init BUILD_DIR: locate the programs, make the work directory, arm the EXIT trap.
 pt_init() {
@@ -72,8 +118,9 @@ pt_spawn() {
 }
 
 # pt_wait_pid PID SECONDS: wait for PID to exit; its status in PT_RC. 1 on timeout.
+# Like every deadline of the pt_wait*/pt_up* helpers, SECONDS is multiplied by NUDGE_SLOW.
 pt_wait_pid() {
-  local pid=$1 end=$((SECONDS + $2))
+  local pid=$1 end=$((SECONDS + $2 * PT_SLOW))
   while kill -0 "$pid" 2>/dev/null; do
     ((SECONDS >= end)) && return 1
     sleep 0.1
@@ -85,7 +132,7 @@ pt_wait_pid() {
 
 # pt_wait_for SECONDS COMMAND...: poll COMMAND every 0.2 s until it succeeds.
 pt_wait_for() {
-  local end=$((SECONDS + $1))
+  local end=$((SECONDS + $1 * PT_SLOW))
   shift
   until "$@" >/dev/null 2>&1; do
     ((SECONDS >= end)) && return 1
@@ -112,7 +159,7 @@ pt_stop_logger() {
 # pt_up_wait LOGDIR SECONDS PID: wait until the supervisor PID says all processes are up;
 # 1 at the deadline or as soon as it has exited (it gives up when one cannot start).
 pt_up_wait() {
-  local end=$((SECONDS + $2))
+  local end=$((SECONDS + $2 * PT_SLOW))
   until grep -q 'all up' "$1/supervisor.log" 2>/dev/null; do
     if ((SECONDS >= end)) || ! kill -0 "$3" 2>/dev/null; then return 1; fi
     sleep 0.2
@@ -123,7 +170,7 @@ pt_up_wait() {
 pt_up_stop() {
   kill -INT "$1" 2>/dev/null
   if ! pt_wait_pid "$1" "$2"; then
-    pt_fail "nudge-up (pid $1) did not stop within $2 s of SIGINT"
+    pt_fail "nudge-up (pid $1) did not stop within $(($2 * PT_SLOW)) s of SIGINT"
     kill -KILL "$1" 2>/dev/null
     wait "$1"
     PT_RC=137
@@ -247,12 +294,20 @@ pt_cleanup() {
     ((q == 1 || q == $$)) && continue
     kill -KILL "$q" 2>/dev/null && pt_say "cleanup: killed leftover process $q"
   done
+  # Everything has stopped now, so every leak report has been written.
+  if [[ -n ${PT_WORK:-} && -d $PT_WORK ]]; then
+    pt_sanitizer_scan "$PT_WORK" && pt_ok "no sanitizer report in the logs"
+  fi
   if ((rc != 0 || PT_FAILS > 0)); then
     pt_dump_logs "$PT_WORK"/*/*.log "$PT_WORK"/*.out "$PT_WORK"/*.err
   fi
   local c
-  for c in "${PT_ON_CLEANUP[@]}"; do eval "$c"; done
-  [[ -n ${PT_WORK:-} && -d $PT_WORK ]] && rm -rf -- "$PT_WORK"
+  for c in "${PT_ON_CLEANUP[@]}"; do "$c"; done
+  if [[ -n ${PT_KEEP:-}${ND_KEEP:-} ]]; then
+    pt_say "kept the work directory $PT_WORK (PT_KEEP)"
+  elif [[ -n ${PT_WORK:-} && -d $PT_WORK ]]; then
+    rm -rf -- "$PT_WORK"
+  fi
   if ((rc == 0 && PT_FAILS > 0)); then rc=1; fi
   if ((rc == 0)); then pt_say "PASSED"; elif ((rc != 77)); then pt_say "FAILED ($PT_FAILS failed checks, status $rc)"; fi
   exit $rc

@@ -597,6 +597,48 @@ static int upd_cost(void *vctx, const double *x, int n, double *cost) {
   return 0;
 }
 
+/* step_std: along a slope the std follows the mean's steps and grows, where plain CEM's
+ * shrinks; once the elites straddle the optimum it collapses like plain CEM's. A 1-D bowl
+ * (x - 10)^2 from x = 0, std 1, Q 32, rho 0.2, as the theta fit runs it. */
+static int bowl1_cost(void *ctx, const double *x, int n, double *cost) {
+  const double t = *(const double *)ctx;
+  for (int k = 0; k < n; k++) cost[k] = (x[k] - t) * (x[k] - t);
+  return 0;
+}
+
+static void run_bowl1(int step_std, int iters, double *mean, double *std) {
+  nd_cem_cfg cfg;
+  nd_cem_cfg_default(&cfg, 1, 1, 32, iters);
+  cfg.elite_frac = 0.2;
+  cfg.step_std = step_std;
+  nd_cem *cem = nd_cem_create(&cfg, NULL, 0);
+  assert_non_null(cem);
+  const double m0 = 0, s0 = 1;
+  nd_cem_set_dist(cem, &m0, &s0);
+  nd_rng r;
+  nd_rng_seed(&r, 3, 0);
+  static const double target = 10;
+  assert_int_equal(nd_cem_run(cem, &r, bowl1_cost, (void *)&target), 0);
+  *mean = nd_cem_mean(cem)[0];
+  *std = nd_cem_std(cem)[0];
+  nd_cem_free(cem);
+}
+
+static void test_step_std(void **state) {
+  (void)state;
+  double m_plain, s_plain, m_step, s_step;
+  run_bowl1(0, 4, &m_plain, &s_plain);
+  run_bowl1(1, 4, &m_step, &s_step);
+  printf("after 4 iterations: plain mean %.3f std %.3f, step_std mean %.3f std %.3f\n",
+         m_plain, s_plain, m_step, s_step);
+  assert_true(m_plain < 3 && s_plain < 0.2);  /* frozen on the slope */
+  assert_true(m_step > 2 * m_plain && s_step > 1);  /* still travelling, faster */
+  run_bowl1(1, 16, &m_step, &s_step);
+  printf("after 16 iterations: step_std mean %.6f std %.2e\n", m_step, s_step);
+  assert_near(m_step, 10, 1e-2);
+  assert_true(s_step < 1e-2);
+}
+
 static void test_update_rule(void **state) {
   (void)state;
   nd_cem_cfg cfg;
@@ -722,6 +764,7 @@ int main(void) {
       cmocka_unit_test(test_shift),
       cmocka_unit_test(test_elite_selection),
       cmocka_unit_test(test_update_rule),
+      cmocka_unit_test(test_step_std),
       cmocka_unit_test(test_callback_error),
       cmocka_unit_test(test_invalid_cfg),
   };

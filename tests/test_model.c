@@ -137,6 +137,39 @@ static void test_bad_theta_rejected(void **state) {
   nds_model_free(&nm);
 }
 
+/* Command-line theta: every refusal names the option, whatever part of the check fails. */
+static void test_theta_parse(void **state) {
+  (void)state;
+  double th[NDS_NTHETA];
+  char err[256];
+  assert_int_equal(nds_theta_parse("0.3,0.005,1e-4,1.5", "--theta", th, err, sizeof(err)), 0);
+  assert_near(th[NDS_TH_SLIDE], 0.3, 0);
+  assert_near(th[NDS_TH_MASS], 1.5, 0);
+  /* Zero friction is a valid world, as in nds_theta_check. */
+  assert_int_equal(nds_theta_parse("0,0,0,1", "--theta", th, err, sizeof(err)), 0);
+  struct {
+    const char *s, *what;
+  } bad[] = {
+      {"-0.1,0.005,1e-4,1", "-0.1 is out of range"},           /* negative */
+      {"1,0.005,1e-4,0", "theta[3] (sphere mass) = 0"},        /* zero mass */
+      {"1,0.005,1e-4,-0", "theta[3] (sphere mass) = -0"},      /* signed zero */
+      {"nan,0.005,1e-4,1", "'nan' is not a finite number"},    /* NaN */
+      {"1,inf,1e-4,1", "'inf' is not a finite number"},        /* infinite */
+      {"1,0.005,1e-4,1e5", "100000 is out of range"},          /* absurd */
+      {"1,0.005,1e-4", "expected 4 comma-separated numbers"},  /* too few */
+      {"1,0.005,1e-4,1,1", "expected 4 comma-separated numbers"},  /* too many */
+      {"1;0.005;1e-4;1", "expected 4 comma-separated numbers"},
+      {"", "expected 4 comma-separated numbers"},
+  };
+  for (size_t i = 0; i < sizeof(bad) / sizeof(bad[0]); i++) {
+    err[0] = 0;
+    if (nds_theta_parse(bad[i].s, "--prior-ref", th, err, sizeof(err)) != -1)
+      fail_msg("'%s' accepted", bad[i].s);
+    assert_contains(err, "--prior-ref");
+    assert_contains(err, bad[i].what);
+  }
+}
+
 /* Applying theta to a built model gives the model built with that theta: friction,
  * mass, inertia and every quantity MuJoCo derives from mass at compile time. */
 static void test_theta_apply_matches_build(void **state) {
@@ -395,6 +428,34 @@ static void test_load_file(void **state) {
   assert_null(f.m);
   assert_contains(err, missing);
 
+  /* Malformed XML (cut short, not XML at all, an unknown element) is refused with the
+   * file's name and the parser's reason. */
+  struct {
+    size_t keep;       /* bytes of the good file kept; 0: text instead */
+    const char *text, *what;
+  } junk[] = {
+      {200, NULL, "XML"},
+      {0, "this is not MJCF\n", "XML"},
+      {0, "<mujoco><worldbody><bogus/></worldbody></mujoco>", "bogus"},
+      {0, "", "XML"},
+  };
+  for (size_t i = 0; i < sizeof(junk) / sizeof(junk[0]); i++) {
+    char bad[4096];
+    if (junk[i].keep) {
+      memcpy(bad, xml, junk[i].keep);
+      bad[junk[i].keep] = 0;
+    } else {
+      strcpy(bad, junk[i].text);
+    }
+    write_tmp(bad, path);
+    err[0] = 0;
+    assert_int_equal(nds_model_load_file(&f, path, &cfg, err, sizeof(err)), -1);
+    unlink(path);
+    assert_null(f.m);
+    assert_contains(err, path);
+    assert_contains(err, junk[i].what);
+  }
+
   /* Missing parts are named with the file. */
   struct {
     const char *from, *to, *from2, *to2, *what;
@@ -497,6 +558,7 @@ int main(void) {
       cmocka_unit_test(test_default_scene),
       cmocka_unit_test(test_bad_cfg_rejected),
       cmocka_unit_test(test_bad_theta_rejected),
+      cmocka_unit_test(test_theta_parse),
       cmocka_unit_test(test_theta_apply_matches_build),
       cmocka_unit_test(test_theta_apply_idempotent),
       cmocka_unit_test(test_copy_is_independent),

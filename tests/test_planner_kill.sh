@@ -25,19 +25,22 @@ pt_init "$@"
 
 LOG=$PT_WORK/kill.lcmlog
 RUN=$PT_WORK/run
-TIMEOUT_S=0.1                # the executor's --timeout (passed explicitly)
+# The executor's --timeout (passed explicitly): 0.1 s, the default. A slow build
+# (NUDGE_SLOW) plans less often than that, and the executor would brake between any two
+# plans; its timeout is scaled so that it tracks until the kill, as in a Release run.
+TIMEOUT_S=$(pt_slow 0.1)
 GOAL=0.30,0.05,0             # ~30 cm from the object's start at the origin
 
 pt_logger "$LOG"
 pt_spawn up "$PT_BIN/nudge-up" run --log-dir "$RUN" --executor-arg --timeout \
   --executor-arg "$TIMEOUT_S" 2>"$PT_WORK/up.err"
-pt_up_wait "$RUN" 30 "$up" || { pt_fail "nudge-up run did not come up within 30 s (see supervisor.log below)"; exit 1; }
+pt_up_wait "$RUN" 30 "$up" || { pt_fail "nudge-up run did not come up within $((30 * PT_SLOW)) s (see supervisor.log below)"; exit 1; }
 pt_ok "nudge-up run: all processes up"
 
-pt_spawn tasks "$PT_BIN/nudge-tasks" --goal "$GOAL" --tau 15 >"$PT_WORK/tasks.out" \
+pt_spawn tasks "$PT_BIN/nudge-tasks" --goal "$GOAL" --tau "$(pt_slow 15)" >"$PT_WORK/tasks.out" \
   2>"$PT_WORK/tasks.err"
 if ! pt_wait_for 15 "$PT_LC" live "$LOG" --min-plans 5 --min-speed 0.05; then
-  pt_fail "no plans or no motion within 15 s of the task's start"
+  pt_fail "no plans or no motion within $((15 * PT_SLOW)) s of the task's start"
   "$PT_LC" live "$LOG"
   exit 1
 fi
@@ -57,7 +60,7 @@ grep -E 'nudge-planner (exited|restarted)|restarted nudge-planner' "$RUN/supervi
 if pt_wait_pid "$tasks" 40; then
   pt_check "nudge-tasks exits 0 (got $PT_RC)" test "$PT_RC" -eq 0
 else
-  pt_fail "nudge-tasks did not finish within 40 s"
+  pt_fail "nudge-tasks did not finish within $((40 * PT_SLOW)) s"
 fi
 cat "$PT_WORK/tasks.out"
 t_int=$(pt_now_us)

@@ -3,7 +3,6 @@
  *
  *   netns-run test_proc_adapter BUILD_DIR/bin
  *
- *
  * 1. One task in the running system appends exactly one more valid rollout to the buffer,
  *    and a PARAMS message with the next version, fitted on that many rollouts, arrives.
  * 2. A SIGKILLed and restarted adapter goes on from its history: it republishes the
@@ -13,7 +12,9 @@
  *
  * Runs under tests/netns-run, which provides the private namespaces and LCM_DEFAULT_URL
  * (and reports 77, skipped, where namespaces cannot be made). Ends by itself: every wait
- * has a deadline, and the supervisor is stopped with SIGINT (SIGKILL after 20 s). */
+ * has a deadline, and the supervisor is stopped with SIGINT (SIGKILL after 20 s).
+ * Deadlines and the task's time limit scale with NUDGE_SLOW, and a sanitizer report in
+ * any log of the run fails the test, as in every process test (tests/process-lib.sh). */
 #define _GNU_SOURCE
 #include "nd_test.h"
 
@@ -29,15 +30,17 @@
 
 #include <lcm/lcm.h>
 
+#include "nd_parse.h"
 #include "nd_rbuf.h"
 #include "nudge/nudge_params_t.h"
 #include "nudge/nudge_status_t.h"
 
 extern char **environ;
 
-/* Straight pushes along x; eps 1e-3 (~3 cm) so each task is a real push of the object. */
+/* Straight pushes along x; eps 1e-3 (~3 cm) so each task is a real push of the object;
+ * tau 2 s, times NUDGE_SLOW (tests/process-lib.sh). */
 #define EPS "1e-3"
-#define TAU "2"
+#define TAU_S 2.0
 
 /* A deliberately wrong initial theta, as the loop is meant to start. */
 #define THETA "0.6,0.005,0.0001,1"
@@ -58,6 +61,11 @@ typedef struct {
   int64_t params_seen;
   /* newest heartbeat per process */
   pid_t hb_pid[NPROC];
+  /* rollouts of the last buffer_count, freed by the next one or teardown, so that a
+   * failed assertion does not leak them */
+  nd_rollout *rs;
+  int nrs;
+  double slow;  /* NUDGE_SLOW: deadlines and time limits are multiplied by it */
 } world;
 
 static world W;
@@ -134,8 +142,11 @@ static int wait_heartbeat(int i, pid_t not, double s) {
 
 /* Run one task toward goal "x,y,yaw" with recording; return nudge-tasks' exit status. */
 static int run_task(const char *goal) {
-  const char *args[] = {"--record", W.buffer, "--goal", goal, "--eps", EPS, "--tau", TAU,
-                        "--wait", "5", "--settle", "0", NULL};
+  char tau[32], wait[32];
+  snprintf(tau, sizeof tau, "%g", TAU_S * W.slow);
+  snprintf(wait, sizeof wait, "%g", 5.0 * W.slow);
+  const char *args[] = {"--record", W.buffer, "--goal", goal, "--eps", EPS, "--tau", tau,
+                        "--wait", wait, "--settle", "0", NULL};
   pid_t pid = spawn("tasks", args);
   if (pid < 0) return -1;
   /* Keep handling LCM so PARAMS published meanwhile are seen. */
@@ -148,16 +159,24 @@ static int run_task(const char *goal) {
   return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
 }
 
-/* Rollouts in the buffer; all must decode (nd_rbuf_read_all refuses otherwise). */
-static int buffer_count(nd_rollout **rs) {
+static void free_rollouts(void) {
+  nd_rbuf_free_all(W.rs, W.nrs);
+  W.rs = NULL;
+  W.nrs = 0;
+}
+
+/* Rollouts in the buffer (in W.rs); all must decode (nd_rbuf_read_all refuses
+ * otherwise). */
+static int buffer_count(void) {
   char err[512];
-  int n = 0;
   nd_rfile_tail tail;
   struct stat st;
+  free_rollouts();
   if (stat(W.buffer, &st) != 0) return 0;
-  if (nd_rbuf_read_all(W.buffer, rs, &n, &tail, err, sizeof(err))) fail_msg("%s", err);
+  if (nd_rbuf_read_all(W.buffer, &W.rs, &W.nrs, &tail, err, sizeof(err)))
+    fail_msg("%s", err);
   assert_int_equal(tail.status, ND_RFILE_END);
-  return n;
+  return W.nrs;
 }
 
 /* Wait up to s seconds for PARAMS with version v; return 1 when seen. */
@@ -172,17 +191,15 @@ static int wait_version(int64_t v, double s) {
 
 static void one_task_one_record_one_version(void **state) {
   (void)state;
-  nd_rollout *rs = NULL;
-  const int n0 = buffer_count(&rs);
-  nd_rbuf_free_all(rs, n0);
+  const int n0 = buffer_count();
   const int64_t v0 = W.have_params ? W.version : 0;
 
   assert_int_equal(run_task("0.15,0,0"), 0);
-  const int n1 = buffer_count(&rs);
+  const int n1 = buffer_count();
   assert_int_equal(n1, n0 + 1);
-  const nd_rollout *r = &rs[n1 - 1];
-  /* A task of at most 2 s at 1 kHz (it may end early on success). */
-  assert_true(r->n >= 50 && r->n <= 2100);
+  const nd_rollout *r = &W.rs[n1 - 1];
+  /* A task of at most tau at 1 kHz (it may end early on success). */
+  assert_true(r->n >= 50 && r->n <= (int)(1000 * TAU_S * W.slow) + 100);
   assert_near(r->dt, 0.001, 0.0);
   assert_int_equal(r->control, ND_CTRL_FORCE);
   assert_true(r->outcome == ND_OUTCOME_SUCCESS || r->outcome == ND_OUTCOME_TIMEOUT);
@@ -191,9 +208,9 @@ static void one_task_one_record_one_version(void **state) {
   assert_true(r->ee[2 * (r->n - 1)] - r->ee_pos[0] > 0.02);
   assert_true(r->sp[6 * (r->n - 1)] - r->ee_pos[0] > 0.02);
   assert_true(r->obj[3 * (r->n - 1)] - r->obj_pos[0] > 0.005);
-  nd_rbuf_free_all(rs, n1);
+  free_rollouts();
 
-  if (!wait_version(v0 + 1, 60.0))
+  if (!wait_version(v0 + 1, 60.0 * W.slow))
     fail_msg("no PARAMS version %lld within 60 s (newest: %lld)", (long long)(v0 + 1),
              (long long)W.version);
   assert_int_equal(W.buffer_size, n1);
@@ -204,13 +221,11 @@ static void killed_adapter_resumes(void **state) {
   /* Two fits at least before the kill: an adapter that ignored its history would refit
    * the buffer as version 1, which must not pass for a resumed version. */
   if (!W.have_params) one_task_one_record_one_version(state);
-  nd_rollout *rs = NULL;
   assert_int_equal(run_task("0.28,0,0"), 0);
-  const int n0 = buffer_count(&rs);
-  nd_rbuf_free_all(rs, n0);
+  const int n0 = buffer_count();
   const int64_t v = W.version + 1;
   assert_true(v >= 2);
-  if (!wait_version(v, 60.0))
+  if (!wait_version(v, 60.0 * W.slow))
     fail_msg("no PARAMS version %lld within 60 s (newest: %lld)", (long long)v,
              (long long)W.version);
   assert_int_equal(W.buffer_size, n0);
@@ -226,10 +241,10 @@ static void killed_adapter_resumes(void **state) {
   W.version = -1;
   W.params_seen = 0;
   /* The supervisor notices within 0.2 s and restarts it after its first backoff, 0.2 s. */
-  if (!wait_heartbeat(P_ADAPTER, old, 15.0))
+  if (!wait_heartbeat(P_ADAPTER, old, 15.0 * W.slow))
     fail_msg("no heartbeat of a restarted nudge-adapter within 15 s (see %s/run)", W.dir);
   /* It republishes the version it reached, and does not refit a covered buffer. */
-  pump(2.5);
+  pump(2.5 * W.slow);
   assert_true(W.params_seen >= 2);
   assert_int_equal(W.version, v);
 
@@ -237,24 +252,24 @@ static void killed_adapter_resumes(void **state) {
 
   /* The next task's refit continues the numbering. */
   assert_int_equal(run_task("0.40,0,0"), 0);
-  const int n = buffer_count(&rs);
-  nd_rbuf_free_all(rs, n);
-  if (!wait_version(v + 1, 60.0))
+  const int n = buffer_count();
+  if (!wait_version(v + 1, 60.0 * W.slow))
     fail_msg("no PARAMS version %lld within 60 s after the restart (newest: %lld)",
              (long long)(v + 1), (long long)W.version);
   assert_int_equal(W.buffer_size, n);
 }
 
-/* SIGINT to the supervisor (it stops the processes in order); SIGKILL after 20 s.
+/* SIGINT to the supervisor (it stops the processes in order); SIGKILL after 20 s (times
+ * NUDGE_SLOW).
  * Return its exit status. */
 static int stop_up(void) {
   if (W.up <= 0) return -1;
   kill(W.up, SIGINT);
-  const double end = mono() + 20.0;
+  const double end = mono() + 20.0 * W.slow;
   int st = 0;
   while (waitpid(W.up, &st, WNOHANG) == 0) {
     if (mono() > end) {
-      fprintf(stderr, "nudge-up did not stop within 20 s of SIGINT: SIGKILL\n");
+      fprintf(stderr, "nudge-up did not stop within %g s of SIGINT: SIGKILL\n", 20.0 * W.slow);
       kill(W.up, SIGKILL);
       waitpid(W.up, &st, 0);
       break;
@@ -290,7 +305,7 @@ static int setup(void **state) {
                         "--adapter-arg", "--threads", "--adapter-arg", "1", NULL};
   W.up = spawn("up", args);
   for (int i = 0; i < NPROC; i++)
-    if (W.up < 0 || !wait_heartbeat(i, 0, 30.0)) {
+    if (W.up < 0 || !wait_heartbeat(i, 0, 30.0 * W.slow)) {
       fprintf(stderr, "nudge-%s did not come up (see %s)\n", names[i], logdir);
       stop_up();
       return -1;
@@ -298,14 +313,30 @@ static int setup(void **state) {
   return 0;
 }
 
+/* Sanitizer reports in the logs of the run: the one check of tests/process-lib.sh, which
+ * prints what it found. Return 0 if there is none. */
+static int sanitizer_scan(void) {
+  char cmd[900];
+  snprintf(cmd, sizeof cmd, "bash -c '. \"$0\" && pt_sanitizer_scan \"$1\"' '%s' '%s'",
+           ND_PROCESS_LIB, W.dir);
+  const int st = system(cmd);
+  if (st == 0) return 0;
+  if (st == -1 || !WIFEXITED(st) || WEXITSTATUS(st) != 1)
+    fprintf(stderr, "test_proc_adapter: could not scan %s for sanitizer reports\n", W.dir);
+  return -1;
+}
+
 static int teardown(void **state) {
   (void)state;
-  const int rc = stop_up();
+  int rc = stop_up();
+  free_rollouts();
   if (W.lcm) {
     nudge_params_t_unsubscribe(W.lcm, W.sub_params);
     nudge_status_t_unsubscribe(W.lcm, W.sub_status);
     lcm_destroy(W.lcm);
   }
+  /* Every process has exited now, so every leak report has been written. */
+  if (sanitizer_scan() != 0 && rc == 0) rc = 1;
   char cmd[400];
   if (rc != 0 || getenv("ND_KEEP")) {
     fprintf(stderr, "nudge-up exited with %d; logs kept in %s\n", rc, W.dir);
@@ -322,6 +353,14 @@ int main(int argc, char **argv) {
     return 2;
   }
   snprintf(W.bin, sizeof(W.bin), "%s", argv[1]);
+  char err[256];
+  const char *slow = getenv("NUDGE_SLOW");
+  int k = 1;
+  if (slow && nd_parse_int(slow, "NUDGE_SLOW", 1, 99, &k, err, sizeof err)) {
+    fprintf(stderr, "test_proc_adapter: %s\n", err);
+    return 2;
+  }
+  W.slow = k;
   signal(SIGPIPE, SIG_IGN);
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(one_task_one_record_one_version),

@@ -35,7 +35,12 @@ if ! why=$(mount -t tmpfs -o size=1m,mode=0700 nudge-full "$FULL" 2>&1); then
   echo "$PT_NAME: SKIP: cannot mount a tmpfs here: $why" >&2
   exit 77
 fi
-pt_on_cleanup "umount -l '$FULL' 2>/dev/null; umount -l '$RO' 2>/dev/null"
+unmount_all() {
+  umount -l "$FULL" 2>/dev/null
+  umount -l "$RO" 2>/dev/null
+  return 0
+}
+pt_on_cleanup unmount_all
 TASK_ARGS=(--eps 2.5e-3 --tau 2 --settle 0.5)
 
 # tasks NAME BUFFER GOAL...: run nudge-tasks recording into BUFFER in the background
@@ -63,7 +68,7 @@ finish() {
 figure() { awk -v n="$1" '$1 == n { print $2 }' "$2"; }
 
 # records FILE: the buffer's record count via nudge-logcheck buffer ("" if unreadable).
-records() { "$PT_LC" buffer "$1" 2>/dev/null | awk '$1 == "buffer_records" { print $2 }'; }
+records() { "$PT_LC" buffer "$1" 2>/dev/null | awk '$1 == "records_in_file" { print $2 }'; }
 
 # check_failed_run NAME BUFFER REASON ENAME: the assertions of cases 1 and 2.
 check_failed_run() {

@@ -458,10 +458,13 @@ static void test_torsion_landscape(void **state) {
 /* The paper's simulation study on a small scale: the three frictions fitted, the mass
  * held, the initial mean drawn from U(theta - D theta, theta + D theta) with D = 1 and the
  * paper's std; Q = 16, C = 3, two refits on the same buffer, as after two episodes. The
- * std floor (sigma0 / 2) lets the mean travel the ~0.5 the draw put it away. Force replay
- * (the paper's): on these slow pushes the box follows the sphere whatever the table's
- * friction, so a setpoint replay, which holds the sphere on its path, sees sliding friction
- * only through the little dynamics there is; it gets half-way (checked at the end). */
+ * step_std rule and the std floor let the mean travel the ~0.5 the draw put it away.
+ * Force replay, re-anchored (the fit's default): on these slow pushes the box follows the
+ * sphere whatever the table's friction, so a setpoint replay, which holds the sphere on its
+ * path, sees sliding friction only through the little dynamics there is; it must at least
+ * halve the error (checked at the end). L(mean) stops at ~1/7 of L(mu0): within 0.3% of the true sliding
+ * friction the re-anchored loss is at the level any perturbation of a hypersensitive push
+ * gives (nds_fit.c), 5 orders above its value at the truth. */
 static void test_fit_recovers_sliding(void **state) {
   (void)state;
   char err[256];
@@ -495,15 +498,15 @@ static void test_fit_recovers_sliding(void **state) {
            run, out.mean[0], out.mean[1], out.mean[2], out.std[0], out.loss_mean,
            out.best_loss);
     for (int i = 0; i < out.iters; i++) printf(" %.2e", out.iter_best[i]);
-    printf(" (L(mu0) %.3f)\n", L0);
+    printf(" (L(mu0) %.3e)\n", L0);
     assert_true(out.replays > 16 * NPUSH && out.replays <= (16 * 3 + 1) * NPUSH);
     assert_int_equal(out.diverged_mean, 0);
   }
   assert_near(out.mean[NDS_TH_SLIDE], 1.0, 0.05);
-  assert_true(out.loss_mean < 0.01 * L0);
+  assert_true(out.loss_mean < 0.25 * L0);
   assert_near(out.mean[NDS_TH_MASS], 1.0, 0);  /* held */
   assert_near(out.std[NDS_TH_MASS], 0, 0);
-  assert_true(out.std[NDS_TH_SLIDE] >= 0.5 * cfg.sigma0[NDS_TH_SLIDE] * (1 - 1e-12));
+  assert_true(out.std[NDS_TH_SLIDE] >= cfg.std_floor * cfg.sigma0[NDS_TH_SLIDE] * (1 - 1e-12));
   /* The distribution persists: what the run reports is what the next one starts from. */
   double m[NDS_NTHETA], s[NDS_NTHETA];
   nds_fit_dist(f, m, s);
@@ -513,9 +516,12 @@ static void test_fit_recovers_sliding(void **state) {
   assert_int_equal(nds_fit_loss(f, out.best, push, NPUSH, &Lb, NULL, err, sizeof(err)), 0);
   assert_true(Lb == out.best_loss);
 
-  /* Plain CEM (no floor) from the same start freezes on the way: its std collapses
-   * within the first run, and the mean stops short of the truth. */
+  /* Plain CEM (no floor, no step_std) from the same start freezes on the way: its std
+   * collapses within the first run, and the mean stops short of the truth. */
+  const nds_fit_cfg dflt = cfg;
   cfg.std_floor = 0;
+  cfg.step_std = 0;
+  cfg.rel_floor = 0;
   nds_fit *g = nds_fit_create(&nm, &cfg, pool, err, sizeof(err));
   assert_non_null(g);
   assert_int_equal(nds_fit_run(g, push, NPUSH, &out, err, sizeof(err)), 0);
@@ -525,7 +531,9 @@ static void test_fit_recovers_sliding(void **state) {
   nds_fit_free(g);
 
   /* Setpoint replay from the same start: on the way, not there. */
-  cfg.std_floor = 0.5;
+  cfg.std_floor = dflt.std_floor;
+  cfg.step_std = dflt.step_std;
+  cfg.rel_floor = dflt.rel_floor;
   cfg.replay.mode = NDS_REPLAY_SETPOINT;
   g = nds_fit_create(&nm, &cfg, pool, err, sizeof(err));
   assert_non_null(g);
@@ -620,7 +628,7 @@ static void test_fit_bad_config(void **state) {
   struct {
     const char *what;
     nds_fit_cfg c;
-  } bad[16];
+  } bad[24];
   int nb = 0;
 #define BAD(name, stmt)   \
   bad[nb].what = name;    \
@@ -636,6 +644,10 @@ static void test_fit_bad_config(void **state) {
   BAD("std_floor", c->std_floor = -1);
   BAD("k1", c->k1 = NAN);
   BAD("k2", c->k2 = -1e-3);
+  BAD("step_std", c->step_std = -1);
+  BAD("rel_floor", c->rel_floor = 1);
+  BAD("replay.window", c->replay.window = NAN);
+  BAD("replay.window", c->replay.window = -0.1);
   BAD("fit[1]", c->fit[1] = 2);
   BAD("no parameter", c->fit[0] = c->fit[1] = c->fit[2] = 0);
   BAD("slide prior", c->sigma0[0] = 0);
@@ -716,6 +728,15 @@ static void test_fit_bad_buffer(void **state) {
   /* The loss at the true theta is exactly 0 on records it made, per rollout too. */
   nds_replay_terms per[2];
   assert_int_equal(nds_fit_loss(f, nds_theta_true, rs, 2, &L, per, err, sizeof(err)), 0);
+  /* The loss at the true theta on records it made: re-anchored (the default) within the
+   * tilt's effect on yaw; in one shot exactly 0, per rollout too. */
+  printf("loss_truth_reanchored %.3e\n", L);
+  assert_true(L < 1e-9 && per[1].steps == 300 && per[1].pos_ee < 1e-15);
+  nds_fit_free(g);
+  cfg.replay.window = 0;
+  g = nds_fit_create(&nm, &cfg, pool, err, sizeof(err));
+  assert_non_null(g);
+  assert_int_equal(nds_fit_loss(g, nds_theta_true, rs, 2, &L, per, err, sizeof(err)), 0);
   assert_true(L == 0 && per[1].steps == 300 && per[1].pos_ee == 0);
   nds_fit_free(f);
   nds_fit_free(g);

@@ -274,6 +274,9 @@ typedef struct {
   long cycles, ret_none, ret_sent, ret_full;
   long popped, decode_bad, seq_gaps;
   long plans_posted, plans_far, plans_bad, stretched;
+  long plans_late;                       /* sent LATE_S ago, taken while the state is live */
+  long track_no_plan, track_old_plan;    /* tracking setpoints naming no plan / a stale one */
+  double plan_age_max;                   /* s, oldest plan a tracking setpoint named */
   long over_v, over_a, step_p, step_v;   /* limit or continuity violations */
   long hold_moved;                       /* a HOLD setpoint that moved or was not still */
   long hold_at_plan_stale, hold_at_state_stale, checks_plan_stale, checks_state_stale;
@@ -291,15 +294,23 @@ static double mono(void) {
   return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
+#define TIMEOUT 0.1             /* s, the executor's default input timeout */
+#define LATE_S 0.5              /* s, how long ago a late plan was sent */
+
+/* Every 13th plan was sent LATE_S ago: what an executor resuming from a stall finds
+ * queued. The loop must drop it (counted as late), never follow it. */
+static int plan_is_late(long k) { return k % 13 == 0; }
+
 /* A plan toward a keypoint near p: mostly reachable ones (T 0.3 s, as the planner's),
  * every 7th far and fast to do (the limits stretch it), every 11th faster than v_max at
- * the keypoint (refused). */
+ * the keypoint (refused); late ones are reachable. */
 static void make_plan(nd_rng *r, long k, const double p[2], const nd_exec_cfg *cfg,
                       ndp_execloop_plan_in *pl, run_stats *st) {
   const double dir = 2.0 * ND_PI * nd_rng_uniform(r);
   double reach = 0.1 * nd_rng_uniform(r), speed = 0.3 * cfg->v_max * nd_rng_uniform(r);
   pl->T = 0.3;
-  if (k % 11 == 0) {
+  if (plan_is_late(k)) {
+  } else if (k % 11 == 0) {
     speed = 1.5 * cfg->v_max;
     st->plans_bad++;
   } else if (k % 7 == 0) {
@@ -335,6 +346,13 @@ static void check_setpoint(const unsigned char *buf, int len, const nd_exec_cfg 
   if (v / cfg->v_max > st->peak_v) st->peak_v = v / cfg->v_max;
   if (a / cfg->a_max > st->peak_a) st->peak_a = a / cfg->a_max;
   if (m.mode == ND_EXEC_HOLD && (v != 0.0 || a != 0.0)) st->hold_moved++;
+  if (m.mode == ND_EXEC_TRACK) {
+    /* Tracking names its plan, and that plan is at most the timeout old (+ a period). */
+    const double age = 1e-6 * (double)(m.utime - m.plan_utime);
+    if (m.plan_utime <= 0 || m.plan_id < 0) st->track_no_plan++;
+    else if (age > TIMEOUT + DT) st->track_old_plan++;
+    if (m.plan_utime > 0 && age > st->plan_age_max) st->plan_age_max = age;
+  }
   if (*have_prev && m.seq == prev->seq + 1) {
     const double dp = hypot(m.p[0] - prev->p[0], m.p[1] - prev->p[1]);
     const double dv = hypot(m.v[0] - prev->v[0], m.v[1] - prev->v[1]);
@@ -362,6 +380,7 @@ static void run_scenario(ndp_execloop *s, ndp_execloop_io *io, const nd_exec_cfg
   uint64_t v_rep = 0;
   long plan_k = 1;
   double last_p[2] = {0.0, 0.0};
+  double t_state = -1e9;        /* send time of the newest robot state posted */
   const long total = PRE + (long)EPISODES * EPISODE;
 
   window_open();
@@ -378,10 +397,16 @@ static void run_scenario(ndp_execloop *s, ndp_execloop_io *io, const nd_exec_cfg
       ndp_execloop_state_in in = {now - 2e-4, {last_p[0], last_p[1], 0.025}};
       if (!have_prev) in.ee_pos[0] = 0.05, in.ee_pos[1] = -0.02;
       nd_mailbox_post(&io->state, &in, (int)sizeof in);
+      t_state = in.t_arrive;
     }
     if (plan_on && e % 50 == 0) {
       ndp_execloop_plan_in pl;
-      pl.t_arrive = now - 2e-4;
+      const double sent_ago = plan_is_late(plan_k) ? LATE_S : 2e-4;
+      pl.t_arrive = now - sent_ago;
+      pl.utime = utime - (int64_t)llround(1e6 * sent_ago);
+      /* The loop takes a plan at once while the state is fresh; while it is stale the plan
+       * waits and the next one replaces it. */
+      if (plan_is_late(plan_k) && now - t_state <= TIMEOUT) st->plans_late++;
       make_plan(&rng, plan_k++, last_p, cfg, &pl, st);
       nd_mailbox_post(&io->plan, &pl, (int)sizeof pl);
     }
@@ -438,7 +463,7 @@ static void test_cycle_allocates_nothing(void **state) {
   (void)state;
   const nd_exec_cfg cfg = nd_exec_cfg_default();
   ndp_execloop_io_init(&g_io);
-  ndp_execloop_init(&g_loop, &cfg, 0.1, &g_io);
+  ndp_execloop_init(&g_loop, &cfg, TIMEOUT, &g_io);
   run_stats st;
   memset(&st, 0, sizeof st);
   run_scenario(&g_loop, &g_io, &cfg, &st);
@@ -458,6 +483,8 @@ static void test_cycle_allocates_nothing(void **state) {
   printf("rtloop_plans_accepted %lld count\n", (long long)st.rep.accepted);
   printf("rtloop_plans_refused %lld count\n", (long long)st.rep.refused);
   printf("rtloop_plans_stretched %ld count\n", st.stretched);
+  printf("rtloop_plans_late %lld count\n", (long long)st.rep.late);
+  printf("rtloop_plan_age_max %.1f ms\n", 1e3 * st.plan_age_max);
   printf("rtloop_stale_spells %lld count\n", (long long)st.rep.n_stale);
   printf("rtloop_ring_full_cycles %ld count\n", st.ret_full);
   printf("rtloop_ring_drops %llu count\n", (unsigned long long)drops);
@@ -478,6 +505,8 @@ static void test_cycle_allocates_nothing(void **state) {
   assert_true(st.rep.refused >= EPISODES);              /* limits: refused */
   assert_true(st.stretched >= EPISODES);                /* limits: stretched */
   assert_true(st.plans_far > 0 && st.plans_bad > 0);
+  assert_true(st.plans_late >= EPISODES);               /* sent long ago: dropped */
+  assert_int_equal(st.rep.late, st.plans_late);
   assert_int_equal(st.stale_bits_seen & (NDP_STALE_PLAN | NDP_STALE_STATE),
                    NDP_STALE_PLAN | NDP_STALE_STATE);
   assert_true(st.rep.n_stale >= 2 * EPISODES);
@@ -495,6 +524,10 @@ static void test_cycle_allocates_nothing(void **state) {
   assert_int_equal(st.over_v + st.over_a, 0);
   assert_int_equal(st.step_p + st.step_v, 0);
   assert_int_equal(st.hold_moved, 0);
+  /* Every tracking setpoint names a plan no older than the timeout: never a late one. */
+  assert_int_equal(st.track_no_plan, 0);
+  assert_int_equal(st.track_old_plan, 0);
+  assert_true(st.plan_age_max > 0.5 * TIMEOUT);  /* the plan-stale spells age it */
   assert_true(st.seq_gaps >= EPISODES);
   assert_true(st.peak_a > 0.5);  /* the far plans drive it near its limits */
 }

@@ -29,13 +29,13 @@ GOALS=(--goal 0.15,0,0 --goal 0.25,0.10,0.4)   # the default chain's first two
 # --- 1. demo on two goals --------------------------------------------------------------
 pt_logger "$LOG"
 t_start=$(pt_now_us)
-pt_spawn demo "$PT_BIN/nudge-up" demo --log-dir "$DEMO" -- --tau 5 "${GOALS[@]}" \
+pt_spawn demo "$PT_BIN/nudge-up" demo --log-dir "$DEMO" -- --tau "$(pt_slow 5)" "${GOALS[@]}" \
   >"$PT_WORK/demo.out" 2>"$PT_WORK/demo.err"
 # Start-up ~1 s, two tasks of at most 5 s, settling, stopping: well under 60 s.
 if pt_wait_pid "$demo" 90; then
   pt_check "nudge-up demo exits 0 (the task runner's status; got $PT_RC)" test "$PT_RC" -eq 0
 else
-  pt_fail "nudge-up demo did not finish within 90 s"
+  pt_fail "nudge-up demo did not finish within $((90 * PT_SLOW)) s"
 fi
 pt_figure demo_duration $((($(pt_now_us) - t_start) / 1000)) ms
 pt_stop_logger
@@ -65,9 +65,9 @@ if pt_up_wait "$RUN" 30 "$up"; then
   pt_figure stop_time $((($(pt_now_us) - t_int) / 1000)) ms
   pt_check "nudge-up run exits 0 after SIGINT (got $PT_RC)" test "$PT_RC" -eq 0
   pt_restarts_are "$RUN"
-  pt_check "no process needed SIGKILL" bash -c "! grep -q SIGKILL '$RUN/supervisor.log'"
+  pt_check_not "no process needed SIGKILL" grep -q SIGKILL "$RUN/supervisor.log"
   pt_none_left "$RUN"
 else
-  pt_fail "nudge-up run did not come up within 30 s (see supervisor.log below)"
+  pt_fail "nudge-up run did not come up within $((30 * PT_SLOW)) s (see supervisor.log below)"
 fi
 exit $((PT_FAILS > 0))

@@ -28,11 +28,18 @@
 #include "ndp_history.h"
 
 /* ---- scratch files: one private directory per process, on tmpfs when there is one, so
- * that the writer's fdatasync costs nothing ---- */
+ * that the writer's fdatasync costs nothing. The code under test opens them by name, as
+ * it opens a replay buffer; the target itself keeps a descriptor on each and refills it
+ * in place (ftruncate, pwrite) and reads it back with pread, so an input costs no opens
+ * beyond those of the readers and the writer under test. ---- */
 
 static char fz_dir[512], fz_in[600], fz_copy[600];
+static int fz_in_fd = -1, fz_copy_fd = -1;
 
 static void fz_cleanup(void) {
+  if (fz_in_fd >= 0) close(fz_in_fd);
+  if (fz_copy_fd >= 0) close(fz_copy_fd);
+  fz_in_fd = fz_copy_fd = -1;
   DIR *d = opendir(fz_dir);
   if (d) {
     for (struct dirent *e; (e = readdir(d));) {
@@ -60,34 +67,36 @@ static void fz_setup(void) {
   snprintf(fz_copy, sizeof fz_copy, "%s/copy.buf", fz_dir);
   atexit(fz_cleanup);
   fz_on_abort = fz_cleanup;
+  fz_in_fd = open(fz_in, O_RDWR | O_CREAT | O_EXCL | O_CLOEXEC, 0600);
+  FZ_CHECK(fz_in_fd >= 0, "%s: %s", fz_in, strerror(errno));
+  fz_copy_fd = open(fz_copy, O_RDWR | O_CREAT | O_EXCL | O_CLOEXEC, 0600);
+  FZ_CHECK(fz_copy_fd >= 0, "%s: %s", fz_copy, strerror(errno));
 }
 
-static void fz_put(const char *path, const uint8_t *d, size_t n) {
-  int fd = open(path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
-  FZ_CHECK(fd >= 0, "%s: %s", path, strerror(errno));
+/* Make the scratch file behind fd hold exactly d[0, n): overwrite in place, then cut what
+ * the previous input left beyond n (the pages of [0, n) are reused, not freed and
+ * allocated again as after a truncation to 0). */
+static void fz_put(int fd, const char *path, const uint8_t *d, size_t n) {
   for (size_t done = 0; done < n;) {
-    ssize_t k = write(fd, d + done, n - done);
+    ssize_t k = pwrite(fd, d + done, n - done, (off_t)done);
     FZ_CHECK(k > 0, "%s: %s", path, strerror(errno));
     done += (size_t)k;
   }
-  close(fd);
+  FZ_CHECK(ftruncate(fd, (off_t)n) == 0, "%s: %s", path, strerror(errno));
 }
 
-/* Whole file into a fresh buffer (caller frees). */
-static uint8_t *fz_get(const char *path, size_t *n) {
-  int fd = open(path, O_RDONLY | O_CLOEXEC);
-  FZ_CHECK(fd >= 0, "%s: %s", path, strerror(errno));
+/* Whole file behind fd into a fresh buffer (caller frees). */
+static uint8_t *fz_get(int fd, const char *path, size_t *n) {
   struct stat st;
   FZ_CHECK(fstat(fd, &st) == 0, "%s: %s", path, strerror(errno));
   uint8_t *b = malloc((size_t)st.st_size + 1);
   FZ_CHECK(b != NULL, "out of memory");
   size_t got = 0;
   while (got < (size_t)st.st_size) {
-    ssize_t k = read(fd, b + got, (size_t)st.st_size - got);
+    ssize_t k = pread(fd, b + got, (size_t)st.st_size - got, (off_t)got);
     FZ_CHECK(k > 0, "%s: %s", path, strerror(errno));
     got += (size_t)k;
   }
-  close(fd);
   *n = got;
   return b;
 }
@@ -96,14 +105,17 @@ static uint8_t *fz_get(const char *path, size_t *n) {
 
 enum { FZ_VALID = 3 };  /* beside ND_RFILE_END / _TORN / _CORRUPT */
 
+FZ_ORACLE
 static uint32_t fz_le32(const uint8_t *p) {
   return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
 }
 
+FZ_ORACLE
 static void fz_put32(uint8_t *p, uint32_t v) {
   for (int i = 0; i < 4; i++) p[i] = (uint8_t)(v >> (8 * i));
 }
 
+FZ_ORACLE
 static uint32_t fz_crc(const uint8_t *frame, const uint8_t *payload, uint32_t len) {
   uLong c = crc32(0L, frame, 8);
   if (len) c = crc32(c, payload, (uInt)len);
@@ -113,6 +125,7 @@ static uint32_t fz_crc(const uint8_t *frame, const uint8_t *payload, uint32_t le
 /* What lies at off: FZ_VALID (a complete record with a matching crc; *kind, *len set) or
  * the status reading stops with. Kind and length limits come first: zero-filled or absurd
  * frames are corrupt even when the file also ends too early. */
+FZ_ORACLE
 static int fz_frame(const uint8_t *d, size_t size, size_t off, uint32_t *kind,
                     uint32_t *len) {
   const size_t avail = size - off;
@@ -143,6 +156,7 @@ typedef struct {
   int tail_valid; /* a valid record starts somewhere after end: damage, not a torn tail */
 } fz_model;
 
+FZ_ORACLE
 static void fz_model_run(fz_model *m, const uint8_t *d, size_t size) {
   memset(m, 0, sizeof *m);
   m->header_ok = size >= ND_RFILE_HEADER && memcmp(d, ND_RFILE_MAGIC, 8) == 0 &&
@@ -166,6 +180,8 @@ static void fz_model_run(fz_model *m, const uint8_t *d, size_t size) {
   m->end = off;
   for (size_t p = off + 1; m->status != ND_RFILE_END && p + ND_RFILE_FRAME <= size; p++) {
     uint32_t kind, len;
+    /* The cheap test first: kind outside [1, ND_RFILE_KIND_MAX] (fz_frame would agree). */
+    if ((d[p + 6] | d[p + 7]) || !(d[p + 4] | d[p + 5])) continue;
     if (fz_frame(d, size, p, &kind, &len) == FZ_VALID) {
       m->tail_valid = 1;
       break;
@@ -334,7 +350,7 @@ static void fz_readers(const uint8_t *d, size_t size, const fz_model *m) {
 }
 
 static void fz_writer(const uint8_t *d, size_t size, const fz_model *m) {
-  fz_put(fz_copy, d, size);
+  fz_put(fz_copy_fd, fz_copy, d, size);
   const uint32_t want = m->header_ok && m->kind >= 1 && m->kind <= ND_RFILE_KIND_MAX
                             ? m->kind
                             : ND_RFILE_KIND_ROLLOUTS;
@@ -358,7 +374,7 @@ static void fz_writer(const uint8_t *d, size_t size, const fz_model *m) {
   nd_rfile_tail rep;
   const int rc = nd_rfile_open_append(&w, fz_copy, want, &rep, err, sizeof err);
   size_t after_len;
-  uint8_t *after = fz_get(fz_copy, &after_len);
+  uint8_t *after = fz_get(fz_copy_fd, fz_copy, &after_len);
   if (!expect) {
     FZ_CHECK(rc == -1 && err[0], "writer accepted: model says refuse (header %d, kind %u, "
              "valid record after the damage %d)", m->header_ok, m->kind, m->tail_valid);
@@ -387,7 +403,7 @@ static void fz_writer(const uint8_t *d, size_t size, const fz_model *m) {
   FZ_CHECK(nd_rfile_append(&w, want, payload, plen, err, sizeof err) == 0, "%s", err);
   nd_rfile_writer_close(&w);
 
-  after = fz_get(fz_copy, &after_len);
+  after = fz_get(fz_copy_fd, fz_copy, &after_len);
   fz_model m2;
   fz_model_run(&m2, after, after_len);
   FZ_CHECK(m2.header_ok && m2.kind == want && m2.status == ND_RFILE_END &&
@@ -415,7 +431,7 @@ static void fz_writer(const uint8_t *d, size_t size, const fz_model *m) {
 static void fz_file(const uint8_t *d, size_t size) {
   fz_model m;
   fz_model_run(&m, d, size);
-  fz_put(fz_in, d, size);
+  fz_put(fz_in_fd, fz_in, d, size);
   fz_readers(d, size, &m);
   fz_writer(d, size, &m);
   free(m.recs);
@@ -423,6 +439,7 @@ static void fz_file(const uint8_t *d, size_t size) {
 
 /* Recompute the header crc and the crc of every record whose frame fits in the file.
  * Return 1 if that changed a byte. */
+FZ_ORACLE
 static int fz_fix(uint8_t *d, size_t size) {
   int changed = 0;
   if (size < ND_RFILE_HEADER) return 0;
