@@ -17,8 +17,7 @@
 volatile sig_atomic_t ndp_quit = 0;
 
 static void on_quit(int sig) {
-  (void)sig;
-  ndp_quit = 1;
+  ndp_quit = sig;
 }
 
 void ndp_signals(void) {

@@ -22,7 +22,8 @@
 /* Where nothing leaves the host: ttl=0 multicast on the default LCM group. */
 #define NDP_DEFAULT_URL "udpm://239.255.76.67:7667?ttl=0"
 
-/* Set by SIGINT/SIGTERM once ndp_signals() is installed. */
+/* 0, or the number of the SIGINT/SIGTERM that arrived once ndp_signals() is installed
+ * (so an exit status can report it as 128 + n). */
 extern volatile sig_atomic_t ndp_quit;
 
 /* Install SIGINT/SIGTERM handlers (set ndp_quit, no SA_RESTART so waits return EINTR) and

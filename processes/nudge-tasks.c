@@ -122,24 +122,6 @@ typedef struct {
   char reason[200];
 } task_result;
 
-static volatile sig_atomic_t quit_sig = 0;
-
-static void on_quit(int sig) {
-  ndp_quit = 1;
-  quit_sig = sig;
-}
-
-/* ndp_signals, remembering which signal it was: the exit status reports it (128 + n). */
-static void install_signals(void) {
-  ndp_signals();
-  struct sigaction sa;
-  memset(&sa, 0, sizeof(sa));
-  sa.sa_handler = on_quit;
-  sigemptyset(&sa.sa_mask);
-  sigaction(SIGINT, &sa, NULL);
-  sigaction(SIGTERM, &sa, NULL);
-}
-
 /* Count a refused message in status and log it, rate-limited. */
 static void refuse(tasks_io *io, const char *what, const char *why) {
   io->st.rejected++;
@@ -717,7 +699,7 @@ int main(int argc, char **argv) {
     usage(stderr);
     return 2;
   }
-  install_signals();
+  ndp_signals();
   /* A file-size limit must fail the append (EFBIG, reported), not kill the runner. */
   signal(SIGXFSZ, SIG_IGN);
 
@@ -846,9 +828,9 @@ int main(int argc, char **argv) {
   else
     printf("reached %d/%d goals\n", reached, ran);
   fflush(stdout);
-  status = ndp_quit ? 128 + (quit_sig ? quit_sig : SIGINT) : 0;
+  status = ndp_quit ? 128 + ndp_quit : 0;
 done:
-  if (status == 1 && ndp_quit) status = 128 + (quit_sig ? quit_sig : SIGINT);
+  if (status == 1 && ndp_quit) status = 128 + ndp_quit;
   nudge_mocap_t_unsubscribe(lcm, sub);
   if (sub_rs) nudge_robot_state_t_unsubscribe(lcm, sub_rs);
   if (sub_cmd) nudge_ee_cmd_t_unsubscribe(lcm, sub_cmd);
