@@ -4,15 +4,10 @@
 #include <unistd.h>
 
 #include "nd_test.h"
+#include "nds_test.h"
 #include "nds_ctrl.h"
 #include "nds_model.h"
 #include "nds_state.h"
-
-static int warnings_printed;
-static void count_warning(const char *msg) {
-  (void)msg;
-  warnings_printed++;
-}
 
 static void build(nds_model *nm, const nds_scene_cfg *cfg) {
   char err[256] = "";
@@ -553,7 +548,7 @@ static void test_ctrl_stability_bound(void **state) {
 }
 
 int main(void) {
-  mju_user_warning = count_warning;
+  nds_test_catch_warnings();
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_default_scene),
       cmocka_unit_test(test_bad_cfg_rejected),
@@ -570,8 +565,8 @@ int main(void) {
       cmocka_unit_test(test_ctrl_stability_bound),
   };
   int rc = cmocka_run_group_tests(tests, NULL, NULL);
-  if (warnings_printed) {
-    fprintf(stderr, "MuJoCo printed %d warnings\n", warnings_printed);
+  if (nds_test_warnings) {
+    fprintf(stderr, "MuJoCo printed %d warnings\n", nds_test_warnings);
     rc = 1;
   }
   return rc;

@@ -6,22 +6,8 @@
 
 #include "nd_snap.h"
 #include "nd_test.h"
+#include "nds_test.h"
 #include "nds_fit.h"
-
-static int warnings_printed;
-static void count_warning(const char *msg) {
-  (void)msg;
-  warnings_printed++;
-}
-
-static void build(nds_model *nm, double timestep, const double *theta) {
-  nds_scene_cfg cfg;
-  nds_scene_cfg_default(&cfg);
-  cfg.timestep = timestep;
-  if (theta) memcpy(cfg.theta, theta, sizeof(cfg.theta));
-  char err[256] = "";
-  if (nds_model_init(nm, &cfg, err, sizeof(err))) fail_msg("nds_model_init: %s", err);
-}
 
 /* An empty record of n zeroed steps. */
 static void rec_alloc(nd_rollout *r, int n, double dt, int control) {
@@ -109,7 +95,7 @@ static const double push_keys[NPUSH][16] = {
 static int setup(void **state) {
   (void)state;
   nds_model w;
-  build(&w, 0.001, NULL);
+  nds_test_build(&w, 0.001, NULL);
   mjData *d = mj_makeData(w.m);
   for (int i = 0; i < NPUSH; i++)
     record_push(&w, d, push_yaw[i], push_ee[i], push_keys[i], 4, 0.3, 0.3, ND_CTRL_FORCE,
@@ -150,7 +136,7 @@ static void test_replay_exact(void **state) {
   assert_true(fabs(push[2].obj[3 * push[2].n - 1] - 0.3) > 0.05);
 
   nds_model nm;
-  build(&nm, 0.001, NULL);
+  nds_test_build(&nm, 0.001, NULL);
   mjData *d = mj_makeData(nm.m);
   nds_replay_cfg rc;
   nds_replay_cfg_default(&rc, NDS_REPLAY_FORCE);
@@ -180,7 +166,7 @@ static void test_replay_exact(void **state) {
   /* A dirty mjData: a replay under another theta ran on it first. */
   const double other[NDS_NTHETA] = {0.5, 0.02, 1e-3, 2.0};
   nds_model nb;
-  build(&nb, 0.001, other);
+  nds_test_build(&nb, 0.001, other);
   nds_replay_terms t;
   assert_int_equal(nds_replay(&nb, d, &rc, &push[1], &t, NULL, err, sizeof(err)), 0);
   assert_true(t.pos_o > 0);
@@ -198,7 +184,7 @@ static void test_replay_wrong_theta(void **state) {
   (void)state;
   const double thB[NDS_NTHETA] = {0.5, 0.005, 1e-4, 1.0};
   nds_model nb;
-  build(&nb, 0.001, thB);
+  nds_test_build(&nb, 0.001, thB);
   mjData *d = mj_makeData(nb.m);
   for (int i = 0; i < NPUSH; i++) {
     double L = buffer_loss(&nb, d, &push[i], 1);
@@ -208,7 +194,7 @@ static void test_replay_wrong_theta(void **state) {
   /* Closer thetas give smaller losses: the loss sees the direction of the error. */
   const double thC[NDS_NTHETA] = {0.9, 0.005, 1e-4, 1.0};
   nds_model nc;
-  build(&nc, 0.001, thC);
+  nds_test_build(&nc, 0.001, thC);
   double Lb = buffer_loss(&nb, d, push, NPUSH), Lc = buffer_loss(&nc, d, push, NPUSH);
   printf("loss_buffer_slide0.5 %.4f\nloss_buffer_slide0.9 %.4f\n", Lb, Lc);
   assert_true(Lc > 1e-3 && Lc < 0.2 * Lb);
@@ -223,9 +209,9 @@ static void test_replay_wrong_theta(void **state) {
 static void test_replay_ratio(void **state) {
   (void)state;
   nds_model m2, m2b;
-  build(&m2, 0.002, NULL);
+  nds_test_build(&m2, 0.002, NULL);
   const double thB[NDS_NTHETA] = {0.5, 0.005, 1e-4, 1.0};
-  build(&m2b, 0.002, thB);
+  nds_test_build(&m2b, 0.002, thB);
   mjData *d = mj_makeData(m2.m);
   nds_replay_cfg rc;
   nds_replay_cfg_default(&rc, NDS_REPLAY_FORCE);
@@ -260,7 +246,7 @@ static void test_replay_ratio(void **state) {
     assert_true(pred[5 * k + 4] == ee[1]);
   }
   nds_model m1;
-  build(&m1, 0.001, NULL);
+  nds_test_build(&m1, 0.001, NULL);
   mjData *d1 = mj_makeData(m1.m);
   assert_int_equal(nds_replay(&m1, d1, &rc, &r, &t, pred, err, sizeof(err)), 0);
   assert_int_equal(t.steps, 101);
@@ -270,7 +256,7 @@ static void test_replay_ratio(void **state) {
   double bad_dt[2] = {0.0015, 0.0005};
   for (int i = 0; i < 2; i++) {
     nds_model mb;
-    build(&mb, bad_dt[i], NULL);
+    nds_test_build(&mb, bad_dt[i], NULL);
     mjData *db = mj_makeData(mb.m);
     assert_int_equal(nds_replay_ratio(&mb, &r, err, sizeof(err)), -1);
     assert_non_null(strstr(err, "whole multiple"));
@@ -304,7 +290,7 @@ static void test_replay_velocity(void **state) {
   nd_rollout r;
   rec_alloc(&r, n, dt, ND_CTRL_VELOCITY);
   nds_model nm;
-  build(&nm, dt, NULL);
+  nds_test_build(&nm, dt, NULL);
   nds_state s0;
   const double ee[2] = {-0.3, 0.2};
   nds_state_rest(&nm, 0, 0, 0, ee, &s0);
@@ -350,7 +336,7 @@ static void test_replay_velocity(void **state) {
 static void test_replay_bad_records(void **state) {
   (void)state;
   nds_model nm;
-  build(&nm, 0.001, NULL);
+  nds_test_build(&nm, 0.001, NULL);
   mjData *d = mj_makeData(nm.m);
   nds_replay_cfg rc;
   nds_replay_cfg_default(&rc, NDS_REPLAY_FORCE);
@@ -421,7 +407,7 @@ static void test_replay_bad_records(void **state) {
   r.u = NULL;
   assert_int_equal(nds_replay_ratio(&nm, &r, err, sizeof(err)), -1);
   r.u = u;
-  assert_int_equal(warnings_printed, 0);
+  assert_int_equal(nds_test_warnings, 0);
   free(pred);
   rec_free(&r);
   mj_deleteData(d);
@@ -434,7 +420,7 @@ static void test_replay_bad_records(void **state) {
 static void test_torsion_landscape(void **state) {
   (void)state;
   nds_model nm;
-  build(&nm, 0.001, NULL);
+  nds_test_build(&nm, 0.001, NULL);
   mjData *d = mj_makeData(nm.m);
   char err[256];
   const double tor[7] = {1e-7, 0.0025, 0.004, 0.005, 0.006, 0.01, 0.05};
@@ -471,7 +457,7 @@ static void test_fit_recovers_sliding(void **state) {
   nd_pool *pool = nd_pool_create(2, err, sizeof(err));
   assert_non_null(pool);
   nds_model nm;
-  build(&nm, 0.001, NULL);
+  nds_test_build(&nm, 0.001, NULL);
   nds_fit_cfg cfg;
   nds_fit_cfg_default(&cfg);
   cfg.pop = 16;
@@ -564,7 +550,7 @@ static void test_fit_workers_identical(void **state) {
   nd_rollout rs[2];
   short_buffer(rs, 2, 600);
   nds_model nm;
-  build(&nm, 0.001, NULL);
+  nds_test_build(&nm, 0.001, NULL);
   nds_fit_cfg cfg;
   nds_fit_cfg_default(&cfg);
   cfg.pop = 8;
@@ -617,7 +603,7 @@ static void test_fit_bad_config(void **state) {
   char err[256];
   nd_pool *pool = nd_pool_create(1, err, sizeof(err));
   nds_model nm;
-  build(&nm, 0.001, NULL);
+  nds_test_build(&nm, 0.001, NULL);
   nds_fit_cfg good;
   nds_fit_cfg_default(&good);
   assert_int_equal(nds_fit_cfg_check(&good, err, sizeof(err)), 0);
@@ -699,7 +685,7 @@ static void test_fit_bad_buffer(void **state) {
   short_buffer(rs, 2, 300);
   nd_pool *pool = nd_pool_create(2, err, sizeof(err));
   nds_model nm;
-  build(&nm, 0.001, NULL);
+  nds_test_build(&nm, 0.001, NULL);
   nds_fit_cfg cfg;
   nds_fit_cfg_default(&cfg);
   cfg.pop = 6;
@@ -746,7 +732,7 @@ static void test_fit_bad_buffer(void **state) {
 }
 
 int main(void) {
-  mju_user_warning = count_warning;
+  nds_test_catch_warnings();
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_replay_exact),
       cmocka_unit_test(test_replay_wrong_theta),

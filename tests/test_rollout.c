@@ -5,22 +5,8 @@
 
 #include "nd_snap.h"
 #include "nd_test.h"
+#include "nds_test.h"
 #include "nds_rollout.h"
-
-static int warnings_printed;
-static void count_warning(const char *msg) {
-  (void)msg;
-  warnings_printed++;
-}
-
-static void build(nds_model *nm, double timestep, const double *theta) {
-  nds_scene_cfg cfg;
-  nds_scene_cfg_default(&cfg);
-  cfg.timestep = timestep;
-  if (theta) memcpy(cfg.theta, theta, sizeof(cfg.theta));
-  char err[256] = "";
-  if (nds_model_init(nm, &cfg, err, sizeof(err))) fail_msg("nds_model_init: %s", err);
-}
 
 /* Setpoint state at rest at (x, y). */
 static void sp_at(double x, double y, double sp[2][4]) {
@@ -46,7 +32,7 @@ static void test_tracks_keypoints(void **state) {
   const double dts[4] = {0.001, 0.002, 0.005, 0.01};
   for (int i = 0; i < 4; i++) {
     nds_model nm;
-    build(&nm, dts[i], NULL);
+    nds_test_build(&nm, dts[i], NULL);
     mjData *d = mj_makeData(nm.m);
     nds_ctrl_cfg ctrl;
     nds_ctrl_cfg_default(&ctrl);
@@ -91,7 +77,7 @@ static void test_tracks_keypoints(void **state) {
 
   /* A duration that is not a whole number of steps rounds to the nearest. */
   nds_model nm;
-  build(&nm, 0.007, NULL);
+  nds_test_build(&nm, 0.007, NULL);
   mjData *d = mj_makeData(nm.m);
   nds_ctrl_cfg ctrl;
   nds_ctrl_cfg_default(&ctrl);
@@ -111,7 +97,7 @@ static void test_light_sphere_coarse_step(void **state) {
   (void)state;
   const double th[NDS_NTHETA] = {1, 0.005, 1e-4, 0.2};
   nds_model nm;
-  build(&nm, 0.01, th);
+  nds_test_build(&nm, 0.01, th);
   mjData *d = mj_makeData(nm.m);
   nds_ctrl_cfg ctrl;
   nds_ctrl_cfg_default(&ctrl);
@@ -132,7 +118,7 @@ static void test_light_sphere_coarse_step(void **state) {
 static double push_distance(double slide) {
   const double th[NDS_NTHETA] = {slide, 0.005, 1e-4, 1.0};
   nds_model nm;
-  build(&nm, 0.001, th);
+  nds_test_build(&nm, 0.001, th);
   mjData *d = mj_makeData(nm.m);
   nds_ctrl_cfg ctrl;
   nds_ctrl_cfg_default(&ctrl);
@@ -172,7 +158,7 @@ static void test_deterministic(void **state) {
   nd_pool *pool = nd_pool_create(2, err, sizeof(err));
   assert_non_null(pool);
   nds_model proto;
-  build(&proto, 0.005, NULL);
+  nds_test_build(&proto, 0.005, NULL);
   nds_batch *b = nds_batch_create(&proto, pool, err, sizeof(err));
   assert_non_null(b);
   assert_ptr_equal(nds_batch_pool(b), pool);
@@ -270,7 +256,7 @@ static void test_deterministic(void **state) {
 static void test_divergence(void **state) {
   (void)state;
   nds_model nm;
-  build(&nm, 0.01, NULL);
+  nds_test_build(&nm, 0.01, NULL);
   mjData *d = mj_makeData(nm.m);
   nds_ctrl_cfg ctrl;
   nds_ctrl_cfg_default(&ctrl);
@@ -324,13 +310,13 @@ static void test_divergence(void **state) {
   /* The mjData that diverged still gives the clean result. */
   nds_rollout(&nm, d, &ctrl, &s0, (const double(*)[4])sp0, free_keys, 2, 0.3, &o);
   assert_memory_equal(&good, &o, sizeof(o));
-  assert_int_equal(warnings_printed, 0);
+  assert_int_equal(nds_test_warnings, 0);
   mj_deleteData(d);
   nds_model_free(&nm);
 }
 
 int main(void) {
-  mju_user_warning = count_warning;
+  nds_test_catch_warnings();
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_tracks_keypoints),
       cmocka_unit_test(test_light_sphere_coarse_step),
