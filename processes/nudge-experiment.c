@@ -133,7 +133,8 @@ static void usage(FILE *f) {
 "                   --episodes 4 --pop 32 --iters 2 --tau 3 (explicit options win)\n"
 "  --landscape      instead of the study: record the 10 training tasks with the true\n"
 "                   theta and write DIR/landscape.csv, the loss along each friction for\n"
-"                   both replay modes, with a summary of each curve\n"
+"                   both replay modes (re-anchored as --window says), with a summary\n"
+"                   of each curve\n"
 "  -h, --help       this text\n\n"
 "Replay modes: force replays the recorded force on the sphere open loop (the paper's\n"
 "simulation); setpoint replays the recorded setpoints through the robot's tracking\n"
@@ -1007,6 +1008,7 @@ static int landscape_run(const opts *o) {
     nds_fit_cfg fc;
     nds_fit_cfg_default(&fc);
     fc.replay.mode = modes[k];
+    fc.replay.window = o->window;
     if (!(fits[k] = nds_fit_create(&s.fitm, &fc, s.pool, err, sizeof(err)))) goto done;
   }
   path_in(path, sizeof(path), o->out, "landscape.csv");
@@ -1106,6 +1108,7 @@ static int landscape_run(const opts *o) {
         nds_fit_cfg fc;
         nds_fit_cfg_default(&fc);
         fc.replay.mode = modes[k];
+        fc.replay.window = o->window;
         fc.fit[NDS_TH_SLIDE] = fc.fit[NDS_TH_ROLL] = 0;
         fc.seed = (uint64_t)seed;
         nd_rng rr;
