@@ -51,17 +51,19 @@
  * of each run, which keeps the samples wider than the loss's roughness.
  *
  * Replay: FORCE (the paper's simulation replay) re-anchored every 0.1 s (nds_replay.h).
+ * The figures below scanned L along sliding friction on one buffer (run 3 of the D = 1
+ * A/B above, two planned tasks); `nudge-experiment --landscape --window W` writes the same
+ * curves over ten planned tasks.
  * - FORCE sees sliding friction where SETPOINT hides it: the tracking controller holds the
  *   sphere on its path and the box follows it whatever the table's friction, so the loss
- *   over sliding friction is shallow (L at 20% error 4x its level at 2% on a planned task,
- *   against 7x for FORCE) and a wrong torsional friction moves its minimum to 0.88
- *   (FORCE: ~1.0).
+ *   over sliding friction is shallow (L at 20% error 4x its level at 2%, against 7x for
+ *   FORCE) and a wrong torsional friction moves its minimum to 0.88 (FORCE: ~1.0).
  * - One shot, FORCE's open-loop forces push the sphere off the box as soon as contact
  *   differs, so its L is a cliff on long pushes (a 1e-4 relative change of sliding
  *   friction: L 0.54 on a straight push). Re-anchoring bounds every error to its window.
  * - The recorded pushes are hypersensitive: a 0.1% change of sliding friction already
  *   gives the full ~1e-6 level of L within 0.05 s windows (an instantaneous stick-slip or
- *   contact switch, not compounding error). Longer windows raise the trend over that level
+ *   contact switch, not compounding error: the sphere striking the box). Longer windows raise the trend over that level
  *   (0.2 s: L at 20% error ~12x that at 2%) but let errors compound; 0.1 s measured best.
  * - Under the recording theta the re-anchored replay is exact up to ~1e-9 (the tilt's effect
  *   on yaw; one shot: bit for bit). */
