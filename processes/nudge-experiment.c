@@ -215,7 +215,7 @@ static int parse_args(int argc, char **argv, opts *o) {
     if (!strcmp(a, "--landscape")) { o->landscape = 1; continue; }
     static const char *const with_value[] = {
         "--out", "--runs", "--episodes", "--seed", "--threads", "--pop",
-        "--iters", "--tau", "--eval-tasks", "--plan-dt", "--d", "--replay"};
+        "--iters", "--tau", "--eval-tasks", "--plan-dt", "--d", "--replay", "--window"};
     int known = 0;
     for (size_t k = 0; k < sizeof(with_value) / sizeof(with_value[0]); k++)
       known |= !strcmp(a, with_value[k]);

@@ -177,6 +177,8 @@ int_cases nudge-adapter --threads 0
 int_cases nudge-adapter --nice 20
 num_cases nudge-adapter --prior-d 0
 num_cases nudge-adapter --replay-dt 1
+num_cases nudge-adapter --replay-window -1
+bad nudge-adapter "--threads|out of range" --replay-window 0 --threads 0
 seed_cases nudge-adapter --seed
 theta_cases nudge-adapter --theta
 theta_cases nudge-adapter --prior-ref
@@ -240,6 +242,9 @@ int_cases nudge-experiment --iters 0
 num_cases nudge-experiment --tau 0
 int_cases nudge-experiment --eval-tasks 6
 num_cases nudge-experiment --plan-dt 1
+num_cases nudge-experiment --window -1
+# A good --window is taken (the refusal is the next option's).
+bad nudge-experiment "--runs|out of range" --window 0 --runs 0
 bad nudge-experiment "--d|out of range" --d 0,1
 bad nudge-experiment "--d|nan" --d nan
 bad nudge-experiment "--replay|'xx'" --replay xx
