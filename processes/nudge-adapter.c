@@ -536,10 +536,12 @@ static void collect(adapter *a, fitter *ft) {
   a->covered = n;
   a->failed_n = 0;
   a->st.state = "idle";
-  printf("refit version %lld: %d rollout(s) in %.2f s, loss %.4g%s, theta %.6g %.6g %.6g "
+  printf("refit version %lld: %d rollout(s) in %.2f s, loss %.4g%s%s, theta %.6g %.6g %.6g "
          "%.6g, std %.3g %.3g %.3g %.3g\n",
          (long long)e.version, n, secs, e.loss,
-         out.diverged_mean ? " (mean diverged on some)" : "", e.mean[0], e.mean[1], e.mean[2],
+         out.diverged_mean ? " (mean diverged on some)" : "",
+         out.flat ? " (flat: the rollouts do not tell the candidates apart; theta kept)" : "",
+         e.mean[0], e.mean[1], e.mean[2],
          e.mean[3], e.std[0], e.std[1], e.std[2], e.std[3]);
   fflush(stdout);
   if (publish_params(a))

@@ -113,7 +113,17 @@ struct nds_fit {
   int ntop;
   int nrun;             /* replays run in the batch */
   int lock_init;
+
+  double cost_lo, cost_hi; /* finite candidate costs of the current run */
+  int cost_cut;            /* a candidate of the current run was pruned */
 };
+
+/* Candidate costs that differ by no more than this (m^2) are the same: a buffer that gives
+ * every candidate the same L says nothing about the fitted parameters. Rollouts in which
+ * the sphere never touched the box replay to identical L for any friction (seen: 2.6e-30
+ * and 6.3e-30 over a whole CEM run), while a single contact makes candidates differ by
+ * > 1e-10. */
+#define FLAT_COST 1e-15
 
 void nds_fit_cfg_default(nds_fit_cfg *cfg) {
   memset(cfg, 0, sizeof(*cfg));
@@ -476,6 +486,14 @@ static int cem_cost(void *ctx, const double *x, int n, double *cost) {
   nds_fit *f = ctx;
   for (int c = 0; c < n; c++) to_theta(f, x + (size_t)c * f->nfit, f->theta + NDS_NTHETA * c);
   eval_batch(f, n, 1, cost);
+  for (int c = 0; c < n; c++) {
+    if (isfinite(cost[c])) {
+      f->cost_lo = fmin(f->cost_lo, cost[c]);
+      f->cost_hi = fmax(f->cost_hi, cost[c]);
+    } else {
+      f->cost_cut = 1;
+    }
+  }
   return f->task_err;
 }
 
@@ -526,14 +544,22 @@ int nds_fit_run(nds_fit *f, const nd_rollout *rs, int n, nds_fit_out *out, char 
       xs[j] = fmax(s0[j], f->cfg.rel_floor * fabs(m0[j]));
     nd_cem_set_dist(f->cem, m0, xs);
   }
+  f->cost_lo = INFINITY;
+  f->cost_hi = -INFINITY;
+  f->cost_cut = 0;
   if (nd_cem_run(f->cem, &f->rng, cem_cost, f)) {
     nd_cem_set_dist(f->cem, m0, s0);
     f->rng = r0;
     snprintf(err, errlen, "fit: a record could not be replayed");
     return -1;
   }
+  /* On a flat loss the elites are a draw of ties: CEM would wander and, with step_std,
+   * widen its std on nothing. Keep the distribution instead. */
+  const int flat = !f->cost_cut && f->cost_hi - f->cost_lo <= FLAT_COST;
+  if (flat) nd_cem_set_dist(f->cem, m0, s0);
 
   memset(out, 0, sizeof(*out));
+  out->flat = flat;
   nds_fit_dist(f, out->mean, out->std);
   to_theta(f, nd_cem_best(f->cem), out->best);
   out->best_loss = nd_cem_best_cost(f->cem);

@@ -68,6 +68,10 @@ typedef struct {
   double iter_best[NDS_FIT_MAX_ITERS]; /* lowest L of each iteration */
   int replays;                 /* rollout replays started (pruned ones too), the mean's
                                   included; depends on timing when pruning */
+  int flat;                    /* 1: every candidate scored the same L (the rollouts say
+                                  nothing about the fitted parameters, e.g. the sphere
+                                  never touched the box): the distribution is left as it
+                                  was; best and iter_best still report the draws */
 } nds_fit_out;
 
 typedef struct nds_fit nds_fit;
@@ -87,7 +91,8 @@ int nds_fit_set_dist(nds_fit *f, const double mean[NDS_NTHETA], const double std
 /* The current distribution (held entries: value, std 0). */
 void nds_fit_dist(const nds_fit *f, double mean[NDS_NTHETA], double std[NDS_NTHETA]);
 
-/* C iterations of CEM on the buffer rs[0, n), then L of the resulting mean. Every record
+/* C iterations of CEM on the buffer rs[0, n), then L of the resulting mean (out->flat:
+ * the loss did not tell candidates apart and the distribution is unchanged). Every record
  * is checked first (nds_replay_check). Allocates only when n exceeds every earlier
  * buffer. Return 0, or -1 with a message (distribution unchanged, out untouched). */
 int nds_fit_run(nds_fit *f, const nd_rollout *rs, int n, nds_fit_out *out, char *err,

@@ -597,6 +597,56 @@ static void test_fit_workers_identical(void **state) {
   nds_model_free(&nm);
 }
 
+/* A rollout in which the sphere backs away and never touches the box replays to the same L
+ * under every friction: the fit reports a flat loss and keeps its distribution (without
+ * the guard CEM's mean wandered on ties and step_std widened its std). With one touching
+ * rollout in the buffer the loss tells candidates apart again. */
+static void test_fit_flat_no_contact(void **state) {
+  (void)state;
+  char err[256];
+  nds_model nm;
+  nds_test_build(&nm, 0.001, NULL);
+  mjData *d = mj_makeData(nm.m);
+  const double ee0[2] = {-0.1, 0};
+  const double away[16] = {-0.12, 0, -0.1, 0, -0.16, 0.02, -0.1, 0,
+                           -0.2, 0.02, 0, 0, -0.2, 0.02, 0, 0};
+  nd_rollout rs[2];
+  record_push(&nm, d, 0, ee0, away, 4, 0.3, 0.3, ND_CTRL_FORCE, &rs[0]);
+  mj_deleteData(d);
+  rec_copy(&rs[1], &push[1]);
+  nds_fit_cfg cfg;
+  nds_fit_cfg_default(&cfg);
+  cfg.pop = 8;
+  cfg.iters = 2;
+  cfg.mu0[NDS_TH_SLIDE] = 0.7;
+  nd_pool *pool = nd_pool_create(2, err, sizeof(err));
+  nds_fit *f = nds_fit_create(&nm, &cfg, pool, err, sizeof(err));
+  assert_non_null(f);
+  double m0[NDS_NTHETA], s0[NDS_NTHETA], m1[NDS_NTHETA], s1[NDS_NTHETA];
+  nds_fit_dist(f, m0, s0);
+  nds_fit_out out;
+  for (int run = 0; run < 2; run++) {
+    assert_int_equal(nds_fit_run(f, rs, 1, &out, err, sizeof(err)), 0);
+    assert_int_equal(out.flat, 1);
+    nds_fit_dist(f, m1, s1);
+    assert_memory_equal(m0, m1, sizeof(m0));
+    assert_memory_equal(s0, s1, sizeof(s0));
+    assert_memory_equal(out.mean, m0, sizeof(m0));
+  }
+  printf("no contact: L(mean) %.3e, flat %d, mean unchanged %.3f\n", out.loss_mean, out.flat,
+         out.mean[NDS_TH_SLIDE]);
+  assert_int_equal(nds_fit_run(f, rs, 2, &out, err, sizeof(err)), 0);
+  assert_int_equal(out.flat, 0);
+  nds_fit_dist(f, m1, s1);
+  printf("with a touching push: flat %d, sliding %.3f -> %.3f\n", out.flat, m0[NDS_TH_SLIDE],
+         m1[NDS_TH_SLIDE]);
+  assert_true(m1[NDS_TH_SLIDE] != m0[NDS_TH_SLIDE]);
+  nds_fit_free(f);
+  nd_pool_free(pool);
+  for (int i = 0; i < 2; i++) rec_free(&rs[i]);
+  nds_model_free(&nm);
+}
+
 /* Every bad field of the configuration is refused by name; a bad distribution too. */
 static void test_fit_bad_config(void **state) {
   (void)state;
@@ -742,6 +792,7 @@ int main(void) {
       cmocka_unit_test(test_torsion_landscape),
       cmocka_unit_test(test_fit_recovers_sliding),
       cmocka_unit_test(test_fit_workers_identical),
+      cmocka_unit_test(test_fit_flat_no_contact),
       cmocka_unit_test(test_fit_bad_config),
       cmocka_unit_test(test_fit_bad_buffer),
   };
