@@ -286,40 +286,52 @@ int main(int argc, char **argv) {
   /* The adapter's default model step first (nudge-adapter --replay-dt). */
   double refit_s[3] = {0}, fit_dt[3] = {0.002, 0.001, 0.001};
   const int fit_mode[3] = {dmode, dmode, omode};
+  /* The adapter's configuration is timed REFIT_REPS times (same seed, so the same work):
+   * its figure is the median, as the target is checked against it. */
+  enum { REFIT_REPS = 3 };
+  double rep_s[REFIT_REPS] = {0};
   for (int k = 0; k < 3; k++) {
-    nds_scene_cfg fc = wc;
-    fc.timestep = fit_dt[k];
-    nds_model fm = {0};
-    nds_fit_cfg cfg;
-    nds_fit_cfg_default(&cfg);
-    cfg.replay.mode = fit_mode[k];
-    nd_rng rr;
-    nd_rng_seed(&rr, 1, 7);
-    nds_fit_paper_prior(nds_theta_true, 1.0, cfg.lower, &rr, cfg.mu0, cfg.sigma0);
-    cfg.mu0[NDS_TH_MASS] = nds_theta_true[NDS_TH_MASS];
-    nds_fit *fit = NULL;
-    nds_fit_out fo;
-    double l_true = 0;
-    if (nds_model_init(&fm, &fc, err, sizeof(err)) ||
-        !(fit = nds_fit_create(&fm, &cfg, fpool, err, sizeof(err))) ||
-        nds_fit_loss(fit, nds_theta_true, recs, NREC, &l_true, NULL, err, sizeof(err))) {
-      fprintf(stderr, "nudge-bench: %s\n", err);
-      return 1;
+    const int reps = k == 0 ? REFIT_REPS : 1;
+    for (int rep = 0; rep < reps; rep++) {
+      nds_scene_cfg fc = wc;
+      fc.timestep = fit_dt[k];
+      nds_model fm = {0};
+      nds_fit_cfg cfg;
+      nds_fit_cfg_default(&cfg);
+      cfg.replay.mode = fit_mode[k];
+      nd_rng rr;
+      nd_rng_seed(&rr, 1, 7);
+      nds_fit_paper_prior(nds_theta_true, 1.0, cfg.lower, &rr, cfg.mu0, cfg.sigma0);
+      cfg.mu0[NDS_TH_MASS] = nds_theta_true[NDS_TH_MASS];
+      nds_fit *fit = NULL;
+      nds_fit_out fo;
+      double l_true = 0;
+      if (nds_model_init(&fm, &fc, err, sizeof(err)) ||
+          !(fit = nds_fit_create(&fm, &cfg, fpool, err, sizeof(err))) ||
+          nds_fit_loss(fit, nds_theta_true, recs, NREC, &l_true, NULL, err, sizeof(err))) {
+        fprintf(stderr, "nudge-bench: %s\n", err);
+        return 1;
+      }
+      t0 = now_s();
+      if (nds_fit_run(fit, recs, NREC, &fo, err, sizeof(err))) {
+        fprintf(stderr, "nudge-bench: %s\n", err);
+        return 1;
+      }
+      refit_s[k] = now_s() - t0;
+      if (k == 0) rep_s[rep] = refit_s[k];
+      printf("refit %d x 5 s, Q %d C %d, 2 workers, %s replay%s, model dt %.3f s: %.2f s "
+             "(%d replays), sliding %.3f -> %.3f, L(mean) %.3g, L(theta_true) %.3g\n",
+             NREC, cfg.pop, cfg.iters, nds_replay_mode_name(fit_mode[k]),
+             fit_mode[k] == dmode && k == 0 ? " (the adapter's default)" : "", fit_dt[k], refit_s[k], fo.replays,
+             cfg.mu0[0], fo.mean[0], fo.loss_mean, l_true);
+      nds_fit_free(fit);
+      nds_model_free(&fm);
     }
-    t0 = now_s();
-    if (nds_fit_run(fit, recs, NREC, &fo, err, sizeof(err))) {
-      fprintf(stderr, "nudge-bench: %s\n", err);
-      return 1;
-    }
-    refit_s[k] = now_s() - t0;
-    printf("refit %d x 5 s, Q %d C %d, 2 workers, %s replay%s, model dt %.3f s: %.2f s "
-           "(%d replays), sliding %.3f -> %.3f, L(mean) %.3g, L(theta_true) %.3g\n",
-           NREC, cfg.pop, cfg.iters, nds_replay_mode_name(fit_mode[k]),
-           fit_mode[k] == dmode && k == 0 ? " (the adapter's default)" : "", fit_dt[k], refit_s[k], fo.replays,
-           cfg.mu0[0], fo.mean[0], fo.loss_mean, l_true);
-    nds_fit_free(fit);
-    nds_model_free(&fm);
   }
+  qsort(rep_s, REFIT_REPS, sizeof(double), cmp_double);
+  refit_s[0] = rep_s[REFIT_REPS / 2];
+  printf("refit in the adapter's configuration, %d times: median %.2f s (%.2f..%.2f)\n",
+         REFIT_REPS, refit_s[0], rep_s[0], rep_s[REFIT_REPS - 1]);
   nd_pool_free(fpool);
   for (int i = 0; i < NREC; i++) nd_rollout_free(&recs[i]);
   printf("refit_s_10x5s %.2f s\n", refit_s[0]);
