@@ -97,6 +97,13 @@ else
   pt_say "gnuplot not installed: figures not checked"
 fi
 pt_check "no part of --out was run as a command" test -z "$(find "$W" -name 'pwned[0-9]')"
+# The validation loss's resolution: a band 0 < min <= max measured at the truth, and the
+# runs above it counted out of the runs made.
+band=$(awk '$1 == "val_loss_band_min" {lo = $2} $1 == "val_loss_band_max" {hi = $2}
+  END {print (lo > 0 && hi >= lo && hi < 1) ? "ok" : "bad " lo " " hi}' "$W/exp.out")
+pt_check "it prints the validation loss band at the truth ($band)" test "$band" = ok
+pt_check "it counts the runs whose initial loss is above the band, of 1" \
+  grep -Eq '^runs_val_loss_resolved_ep0_d1 [01]/1 runs$' "$W/exp.out"
 BUF3=$OUT/buffer_d1_r00.nbuf   # three rollouts
 VAL=$OUT/validation.nbuf
 mapfile -t OFF < <(record_offsets "$BUF3")
