@@ -67,14 +67,23 @@ int ndp_execloop_cycle(ndp_execloop *s, double now, int64_t utime) {
   if (s->pending && !state_stale) {
     s->pending = 0;
     if (now - s->plan.t_arrive <= timeout) {
-      const int rc = nd_exec_plan(&s->ex, &s->cfg, now, s->plan.key, s->plan.T,
-                                  s->rep.refused_why, (int)sizeof(s->rep.refused_why));
+      /* Restarting the segment for a re-sent keypoint would postpone it by a re-planning
+       * period every time, and a planner that keeps re-sending one plan (its search finds
+       * nothing better, the robot at rest) would hold the robot still for good: the first
+       * 50 ms of a segment that has to arrive fast may go nowhere, and the next plan
+       * starts it again from there. So the segment goes on, and the plan only renews it. */
+      const int same = nd_exec_heading_to(&s->ex, now, s->plan.key, NDP_EXECLOOP_SAME_KEY);
+      const int rc =
+          same ? ND_EXEC_OK
+               : nd_exec_plan(&s->ex, &s->cfg, now, s->plan.key, s->plan.T,
+                              s->rep.refused_why, (int)sizeof(s->rep.refused_why));
       if (rc == ND_EXEC_OK) {
         s->have_plan = 1;
         s->t_plan = s->plan.t_arrive;
         s->rep.plan_id = s->plan.plan_id;
         s->rep.plan_utime = s->plan.utime;
         s->rep.accepted++;
+        s->rep.kept += same;
       } else {
         /* A refused plan does not refresh the plan clock: a planner sending only
          * unreachable plans must not keep the robot on its old segment. */

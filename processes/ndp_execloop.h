@@ -22,6 +22,10 @@
 #include "ndp.h"
 
 #define NDP_EXECLOOP_REPORT_PERIOD 0.1  /* s between routine report posts */
+/* A plan whose keypoint is within this (m, m/s, per component) of the one the segment is
+ * heading for re-sends it: the planner found nothing better and published its previous
+ * best again, bit for bit. Anything its search changes moves by centimetres. */
+#define NDP_EXECLOOP_SAME_KEY 1e-6
 
 /* Newest robot state: only what the loop needs, stamped with when it was sent. */
 typedef struct {
@@ -50,6 +54,7 @@ typedef struct {
   int64_t n_stale, n_resume;/* transitions to stale and back */
   int64_t cycles, sent;     /* loop cycles; setpoints committed to the ring */
   int64_t accepted, refused;/* plans taken / refused by nd_exec */
+  int64_t kept;             /* of the accepted: re-sent keypoints, their segment kept */
   int64_t late;             /* plans already stale when the loop took them: dropped */
   int64_t refused_id;       /* plan_id of the last refused plan */
   char refused_why[160];    /* nd_exec's reason for it */
@@ -104,6 +109,9 @@ void ndp_execloop_init(ndp_execloop *s, const nd_exec_cfg *cfg, double timeout,
 
 /* One cycle at monotonic time now (s), which is wall-clock time utime (us): take inputs,
  * apply a new plan, step the executor, commit the setpoint for that instant to the ring.
+ * A new plan starts a new segment from the current setpoint, except one that re-sends
+ * the keypoint the running segment is heading for (NDP_EXECLOOP_SAME_KEY): that segment
+ * goes on, so the keypoint stays due when it was first due.
  * Returns 1 if a setpoint was committed, 0 before the first robot state, -1 if the ring
  * was full (counted by the ring). No allocation, no locks, no I/O. */
 int ndp_execloop_cycle(ndp_execloop *s, double now, int64_t utime);

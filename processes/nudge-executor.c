@@ -466,12 +466,12 @@ int main(int argc, char **argv) {
   fprintf(stderr,
           PROG ": stopped after %lld cycles, %lld setpoints; period error p50 %d us, p99 %d "
                "us, max %d us; %lld overruns (%lld deadlines skipped); %llu ring drops; "
-               "max publish backlog %d; plans %lld taken, %lld refused, %lld stale on arrival, "
-               "%lld from an outdated state\n",
+               "max publish backlog %d; plans %lld taken (%lld re-sent the keypoint being "
+               "tracked), %lld refused, %lld stale on arrival, %lld from an outdated state\n",
           (long long)last.cycles, (long long)last.sent, loop.p50_us, loop.p99_us,
           loop.max_us, (long long)loop.overruns, (long long)last.missed,
           (unsigned long long)drops_seen, c.backlog_max, (long long)last.accepted,
-          (long long)last.refused, (long long)last.late,
+          (long long)last.kept, (long long)last.refused, (long long)last.late,
           (long long)c.log_old.count);
   close(io.bell);
   nudge_robot_state_t_unsubscribe(lcm, sub_state);

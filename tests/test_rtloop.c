@@ -532,10 +532,103 @@ static void test_cycle_allocates_nothing(void **state) {
   assert_true(st.peak_a > 0.5);  /* the far plans drive it near its limits */
 }
 
+/* After a planner restart the robot is at rest and the new planner, finding nothing
+ * better, re-sends one plan at 20 Hz: a keypoint 25 mm ahead to be passed at 0.25 m/s,
+ * its segment 0.25 s (0.3 s shortened by the 50 ms its state had aged). Restarting the
+ * segment on every copy kept the robot within 2 mm of where it stood for good (the first
+ * 50 ms of such a segment wind up rather than advance): test_planner_kill's task then
+ * timed out. The loop must keep the segment and reach the keypoint when it is due, while
+ * every setpoint names the newest plan. */
+static void test_resent_plan_after_restart(void **state) {
+  (void)state;
+  const nd_exec_cfg cfg = nd_exec_cfg_default();
+  ndp_execloop_io_init(&g_io);
+  ndp_execloop_init(&g_loop, &cfg, TIMEOUT, &g_io);
+  const double start[2] = {0.03, -0.04};
+  enum { DEAD = 600, BACK = 1000, END = 3000 };  /* ms: planner killed / restarted / end */
+  double key[4] = {0};
+  double p[2] = {start[0], start[1]}, hold[2] = {0.0, 0.0};
+  double t_first = 0.0, t_reach = -1.0, moved = 0.0;
+  long resumed_tracking = 0, named_old = 0, stale_after = 0, held_at_restart = 0;
+  int64_t last_id = 0;
+  window_open();
+  for (long k = 0; k < END; k++) {
+    const double now = T0 + DT * (double)k;
+    const int64_t utime = U0 + 1000 * k;
+    ndp_execloop_state_in in = {now - 2e-4, {p[0], p[1], 0.025}};
+    nd_mailbox_post(&g_io.state, &in, (int)sizeof in);
+    ndp_execloop_plan_in pl;
+    pl.t_arrive = now - 2e-4;
+    pl.utime = utime - 200;
+    if (k < DEAD && k % 50 == 0) {
+      /* The first planner: a new keypoint every plan, the robot moving. */
+      pl.plan_id = 100 + k / 50;
+      pl.T = 0.3;
+      const double f = 0.01 * (double)(k / 50);
+      double k0[4] = {start[0] + 0.02 + f, start[1] + 0.5 * f, 0.1, 0.05};
+      memcpy(pl.key, k0, sizeof k0);
+      nd_mailbox_post(&g_io.plan, &pl, (int)sizeof pl);
+    } else if (k >= BACK && k % 50 == 0) {
+      if (k == BACK) {
+        held_at_restart = g_loop.rep.mode == ND_EXEC_HOLD;
+        hold[0] = p[0], hold[1] = p[1];
+        const double k0[4] = {p[0] + 0.025, p[1] + 0.004, 0.25, 0.04};
+        memcpy(key, k0, sizeof key);
+        t_first = now;
+      }
+      pl.plan_id = 1 + (k - BACK) / 50;  /* the restarted planner counts from 1 */
+      pl.T = 0.25;
+      memcpy(pl.key, key, sizeof key);
+      nd_mailbox_post(&g_io.plan, &pl, (int)sizeof pl);
+      last_id = pl.plan_id;
+    }
+    ndp_execloop_cycle(&g_loop, now, utime);
+    unsigned char buf[ND_RTIO_MAX];
+    int tag, len;
+    while ((len = nd_ring_pop(&g_io.ring, &tag, buf, sizeof buf)) >= 0) {
+      nudge_ee_cmd_t m;
+      if (tag != NDP_EXECLOOP_TAG_EE_CMD || nudge_ee_cmd_t_decode(buf, 0, len, &m) != len)
+        continue;
+      p[0] = m.p[0], p[1] = m.p[1];
+      if (k < BACK) continue;
+      if (m.mode == ND_EXEC_TRACK) resumed_tracking++;
+      if (m.plan_id >= 100) named_old++;
+      if (k > BACK && g_loop.rep.stale) stale_after++;
+      const double d = hypot(m.p[0] - hold[0], m.p[1] - hold[1]);
+      if (d > moved) moved = d;
+      if (t_reach < 0.0 && hypot(m.p[0] - key[0], m.p[1] - key[1]) < 1e-3) t_reach = now;
+    }
+  }
+  window_close();
+  const long n_calls = window_sum(0, N_FN);
+  ndp_execloop_report_post(&g_loop, T0 + 1e6, 1);
+  ndp_execloop_report rep;
+  uint64_t v = 0;
+  assert_int_equal(nd_mailbox_take(&g_io.report, &v, &rep, (int)sizeof rep), (int)sizeof rep);
+  printf("rtloop_restart_moved %.1f mm\n", 1e3 * moved);
+  printf("rtloop_restart_reached %.3f s\n", t_reach < 0.0 ? -1.0 : t_reach - t_first);
+  printf("rtloop_restart_kept %lld count\n", (long long)rep.kept);
+  assert_int_equal(n_calls, 0);
+  assert_true(held_at_restart);  /* the dead planner's plans went stale: at rest */
+  assert_true(resumed_tracking > 0);
+  assert_int_equal(named_old, 0);
+  assert_int_equal(stale_after, 0);
+  assert_int_equal(rep.plan_id, last_id);
+  /* The point: the keypoint is reached when due (0.25 s after the first copy), not never. */
+  if (t_reach < 0.0)
+    fail_msg("the setpoint never came within 1 mm of the re-sent keypoint: it moved at most "
+             "%.1f mm of %.1f mm", 1e3 * moved, 1e3 * hypot(key[0] - hold[0], key[1] - hold[1]));
+  assert_true(t_reach - t_first <= 0.25 + 2 * DT);
+  assert_true(moved > 0.02);
+  /* Every copy after the first renewed the segment instead of restarting it. */
+  assert_true(rep.kept >= 4);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_counter_sees_calls),
       cmocka_unit_test(test_cycle_allocates_nothing),
+      cmocka_unit_test(test_resent_plan_after_restart),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
