@@ -325,6 +325,16 @@ int nd_exec_plan(nd_exec *ex, const nd_exec_cfg *cfg, double now, const double k
   return ND_EXEC_OK;
 }
 
+int nd_exec_heading_to(const nd_exec *ex, double now, const double key[4], double tol) {
+  if (ex->mode != ND_EXEC_TRACK || !(now < ex->t_brake)) return 0;
+  double end[2][4];
+  nd_snap_seg_eval(&ex->seg, ex->seg.T, end);
+  for (int ax = 0; ax < 2; ax++)
+    if (!(fabs(end[ax][0] - key[ax]) <= tol) || !(fabs(end[ax][1] - key[2 + ax]) <= tol))
+      return 0;
+  return 1;
+}
+
 /* Commit to rest from time t on the tracking segment: of a few candidate departures
  * from t to the segment's end (where the brake planned with the segment is the last
  * candidate, always feasible), take the one that reaches rest first. Reaching rest

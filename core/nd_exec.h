@@ -84,6 +84,11 @@ void nd_exec_init(nd_exec *ex, const double p[2], double now);
 int nd_exec_plan(nd_exec *ex, const nd_exec_cfg *cfg, double now, const double key[4],
                  double T, char *err, int errlen);
 
+/* 1 if ex is on a tracking segment that has not ended at now and that ends at key =
+ * (x, y, vx, vy), each component within tol (m, m/s): a plan re-sending that keypoint
+ * asks for nothing the segment is not doing already. 0 otherwise (stopping, holding). */
+int nd_exec_heading_to(const nd_exec *ex, double now, const double key[4], double tol);
+
 /* Setpoint at time now into out[axis][p, v, a, j]; returns the mode. If stale is
  * nonzero in mode TRACK, commits to stopping: of a few candidate brake departures from
  * now to the segment's end (usually now wins), the one reaching rest first within the

@@ -283,6 +283,14 @@ static int nd_rf_fail(char *err, int errlen, const char *path, const char *what)
   return -1;
 }
 
+/* nd_rf_fail for a writer: also keep the errno, so callers can tell a full or read-only
+ * file system from a file that is not theirs to write. */
+static int nd_rf_wfail(nd_rfile_writer *w, char *err, int errlen, const char *path,
+                       const char *what) {
+  w->sys_errno = errno;
+  return nd_rf_fail(err, errlen, path, what);
+}
+
 /* pid holding a flock on fd's file, from /proc/locks (Linux); -1 if unknown. flock
  * records no owner in the file, and a pid file would be one more thing to go stale. */
 static int nd_rf_lock_holder(int fd) {
@@ -342,7 +350,8 @@ static int nd_rf_pwrite_all(int fd, const void *buf, size_t n, int64_t off) {
  * place, so the file appears complete or not at all: readers never see a half header,
  * and link() fails on a name someone else created meanwhile. Return an fd on the new
  * (or the concurrently created) file, or -1. */
-static int nd_rf_create(const char *path, uint32_t kind, char *err, int errlen) {
+static int nd_rf_create(nd_rfile_writer *w, const char *path, uint32_t kind, char *err,
+                        int errlen) {
   static atomic_uint serial;  /* two threads of one process must not share a name */
   char tmp[ND_RFILE_PATH_MAX + 48];
   int fd = -1;
@@ -354,11 +363,11 @@ static int nd_rf_create(const char *path, uint32_t kind, char *err, int errlen) 
     fd = open(tmp, O_RDWR | O_CREAT | O_EXCL | O_CLOEXEC, 0640);
     if (fd < 0 && errno != EEXIST) break;
   }
-  if (fd < 0) return nd_rf_fail(err, errlen, path, "cannot create");
+  if (fd < 0) return nd_rf_wfail(w, err, errlen, path, "cannot create");
   unsigned char h[ND_RFILE_HEADER];
   nd_rf_header(h, kind);
   if (nd_rf_pwrite_all(fd, h, sizeof h, 0) || fsync(fd)) {
-    nd_rf_fail(err, errlen, tmp, "cannot write the header");
+    nd_rf_wfail(w, err, errlen, tmp, "cannot write the header");
     close(fd);
     unlink(tmp);
     return -1;
@@ -369,15 +378,15 @@ static int nd_rf_create(const char *path, uint32_t kind, char *err, int errlen) 
     unlink(tmp);
     if (e != EEXIST) {
       errno = e;
-      return nd_rf_fail(err, errlen, path, "cannot create (link)");
+      return nd_rf_wfail(w, err, errlen, path, "cannot create (link)");
     }
     fd = open(path, O_RDWR | O_CLOEXEC);
-    if (fd < 0) return nd_rf_fail(err, errlen, path, "cannot open for appending");
+    if (fd < 0) return nd_rf_wfail(w, err, errlen, path, "cannot open for appending");
     return fd;
   }
   unlink(tmp);
   if (nd_rf_sync_dir(path)) {
-    nd_rf_fail(err, errlen, path, "cannot sync its directory");
+    nd_rf_wfail(w, err, errlen, path, "cannot sync its directory");
     close(fd);
     return -1;
   }
@@ -403,10 +412,10 @@ int nd_rfile_open_append(nd_rfile_writer *w, const char *path, uint32_t kind,
   }
   int fd = open(path, O_RDWR | O_CLOEXEC);
   if (fd < 0 && errno == ENOENT) {
-    fd = nd_rf_create(path, kind, err, errlen);
+    fd = nd_rf_create(w, path, kind, err, errlen);
     if (fd < 0) return -1;
   } else if (fd < 0) {
-    return nd_rf_fail(err, errlen, path, "cannot open for appending");
+    return nd_rf_wfail(w, err, errlen, path, "cannot open for appending");
   }
   if (flock(fd, LOCK_EX | LOCK_NB)) {
     if (errno == EWOULDBLOCK) {
@@ -416,21 +425,21 @@ int nd_rfile_open_append(nd_rfile_writer *w, const char *path, uint32_t kind,
       else
         snprintf(err, (size_t)errlen, "%s: locked by another writer (pid unknown)", path);
     } else {
-      nd_rf_fail(err, errlen, path, "cannot lock");
+      nd_rf_wfail(w, err, errlen, path, "cannot lock");
     }
     close(fd);
     return -1;
   }
   struct stat st;
   if (fstat(fd, &st)) {
-    nd_rf_fail(err, errlen, path, "cannot stat");
+    nd_rf_wfail(w, err, errlen, path, "cannot stat");
     goto fail;
   }
   if (st.st_size == 0) {  /* created empty by someone else (touch): ours to initialise */
     unsigned char h[ND_RFILE_HEADER];
     nd_rf_header(h, kind);
     if (nd_rf_pwrite_all(fd, h, sizeof h, 0) || fdatasync(fd)) {
-      nd_rf_fail(err, errlen, path, "cannot write the header");
+      nd_rf_wfail(w, err, errlen, path, "cannot write the header");
       goto fail;
     }
     st.st_size = ND_RFILE_HEADER;
@@ -448,7 +457,7 @@ int nd_rfile_open_append(nd_rfile_writer *w, const char *path, uint32_t kind,
     unsigned char hdr[ND_RFILE_FRAME];
     int k = nd_rf_frame(fd, off, size, &len, &rkind, &crc, hdr, t);
     if (k < 0 || (k > 0 && nd_rf_crc_stream(fd, off, hdr, len, &computed))) {
-      nd_rf_fail(err, errlen, path, "cannot read while scanning the records");
+      nd_rf_wfail(w, err, errlen, path, "cannot read while scanning the records");
       goto fail;
     }
     if (k == 0) break;
@@ -466,7 +475,7 @@ int nd_rfile_open_append(nd_rfile_writer *w, const char *path, uint32_t kind,
   if (t->status != ND_RFILE_END) {
     const int64_t next = nd_rf_find_valid(fd, off, size);
     if (next == -2) {
-      nd_rf_fail(err, errlen, path, "cannot read while scanning the records");
+      nd_rf_wfail(w, err, errlen, path, "cannot read while scanning the records");
       goto fail;
     }
     if (next >= 0) {
@@ -477,7 +486,7 @@ int nd_rfile_open_append(nd_rfile_writer *w, const char *path, uint32_t kind,
       goto fail;
     }
     if (ftruncate(fd, (off_t)off) || fdatasync(fd)) {
-      nd_rf_fail(err, errlen, path, "cannot cut the torn tail");
+      nd_rf_wfail(w, err, errlen, path, "cannot cut the torn tail");
       goto fail;
     }
   }
@@ -498,6 +507,7 @@ int nd_rfile_append(nd_rfile_writer *w, uint32_t kind, const void *payload, uint
     snprintf(err, (size_t)errlen, "record file writer is not open");
     return -1;
   }
+  w->sys_errno = 0;
   if (w->broken) {
     snprintf(err, (size_t)errlen, "%s: writer unusable after a failed sync; reopen it (the "
              "reopen checks and repairs the tail)", w->path);
@@ -529,6 +539,7 @@ int nd_rfile_append(nd_rfile_writer *w, uint32_t kind, const void *payload, uint
     if (k <= 0) {
       if (k == 0) errno = EIO;
       const int e = errno;
+      w->sys_errno = e;
       int cut = ftruncate(w->fd, (off_t)w->end);
       if (cut) w->broken = 1;
       snprintf(err, (size_t)errlen,
@@ -544,6 +555,7 @@ int nd_rfile_append(nd_rfile_writer *w, uint32_t kind, const void *payload, uint
     /* After a failed sync the kernel may have dropped the dirty pages: neither this
      * record nor a retried sync can be trusted, so undo and stop. */
     const int e = errno;
+    w->sys_errno = e;
     w->broken = 1;
     int cut = ftruncate(w->fd, (off_t)w->end);
     snprintf(err, (size_t)errlen, "%s: fdatasync after appending at offset %lld failed: %s "

@@ -82,6 +82,10 @@ typedef struct {
   int64_t end;           /* offset after the last committed record */
   int64_t records;       /* committed records */
   int broken;            /* an fdatasync failed: the file state is unknown, reopen */
+  int sys_errno;         /* errno of the system call that failed the last open or append
+                            (ENOSPC, EROFS, EIO, ...); 0 after a success and after a
+                            failure of another kind (locked by another writer, not a
+                            record file, wrong kind, damage inside the file, arguments) */
   char path[ND_RFILE_PATH_MAX];
 } nd_rfile_writer;
 

@@ -14,7 +14,9 @@
  * setpoint. Its one system call besides the clock is a non-blocking eventfd write that
  * wakes the main thread to publish at once: polling the ring instead would add up to a
  * period of latency to every setpoint. Everything the loop reports (mode, stale spells,
- * refused plans, jitter) goes back through a third mailbox. */
+ * refused plans, jitter) goes back through a third mailbox. The cycle itself (inputs,
+ * nd_exec, the ring) is ndp_execloop.c, so tests can run it on synthetic time; this file
+ * adds its clock, the I/O thread and the command line. */
 #include <errno.h>
 #include <math.h>
 #include <pthread.h>
@@ -33,68 +35,22 @@
 #include "nd_parse.h"
 #include "nd_rtio.h"
 #include "ndp.h"
+#include "ndp_execloop.h"
 #include "ndp_validate.h"
 
 #define PROG "nudge-executor"
-#define STATS_PERIOD 0.1   /* s between statistics posts of the loop */
 #define RT_PRIORITY 80      /* the loop */
 #define IO_PRIORITY 70      /* the main thread: publishing must not starve behind batch work */
 #define RT_STACK (256 * 1024)
 
-/* ---- what crosses between the threads ---------------------------------------------- */
-
-/* Newest robot state: only what the loop needs, stamped with its local arrival time. */
-typedef struct {
-  double t_arrive;     /* ndp_mono() when it was sent (ndp_sent_mono): ages count from there */
-  double ee_pos[3];
-} state_in;
-
-/* Newest plan: its first keypoint and segment duration. */
-typedef struct {
-  double t_arrive;     /* as state_in's */
-  int64_t plan_id;
-  int64_t utime;       /* plan_t.utime, passed on in EE_CMD.plan_utime */
-  double key[4];       /* (x, y, vx, vy) */
-  double T;
-} plan_in;
-
-/* Why the executor is stale: bits. */
-enum { STALE_NO_PLAN = 1, STALE_PLAN = 2, STALE_STATE = 4 };
-
-/* What the loop tells the I/O thread: posted every STATS_PERIOD and at once on a stale
- * transition or a refused plan. Counters only grow, so a reader that misses a post
- * still sees every event in the next one. */
-typedef struct {
-  int mode;                 /* ND_EXEC_* mode, or -1 before the first robot state */
-  int stale;                /* STALE_* bits, 0 when live */
-  int64_t n_stale, n_resume;/* transitions to stale and back */
-  int64_t cycles, sent;     /* loop cycles; setpoints committed to the ring */
-  int64_t accepted, refused;/* plans taken / refused by nd_exec */
-  int64_t late;             /* plans already stale when the loop took them: dropped */
-  int64_t refused_id;       /* plan_id of the last refused plan */
-  char refused_why[160];    /* nd_exec's reason for it */
-  int64_t plan_id;          /* plan being followed, -1 before the first */
-  int64_t plan_utime;       /* its utime, 0 before the first */
-  int64_t missed;           /* deadlines skipped after overruns */
-  ndp_loop_stats loop;      /* period error (us) and overruns */
-} rt_report;
-
-_Static_assert(sizeof(state_in) <= ND_RTIO_MAX && sizeof(plan_in) <= ND_RTIO_MAX &&
-                   sizeof(rt_report) <= ND_RTIO_MAX,
-               "mailbox payloads must fit an nd_mailbox");
-
-/* Tag of EE_CMD messages in the ring (the only kind the loop publishes). */
-enum { TAG_EE_CMD = 1 };
+/* ---- the loop ---------------------------------------------------------------------- */
 
 /* The hand-over objects, shared by both threads. */
 typedef struct {
-  nd_mailbox state, plan, report;
-  nd_ring ring;
+  ndp_execloop_io x;   /* mailboxes and the setpoint ring (ndp_execloop.h) */
   int bell;            /* eventfd: the loop rings it after committing to the ring */
   atomic_int stop;
 } exec_io;
-
-/* ---- the loop ---------------------------------------------------------------------- */
 
 /* Settings; constant once the loop runs. */
 typedef struct {
@@ -105,144 +61,12 @@ typedef struct {
   const char *url;
 } exec_opts;
 
-/* Mutable state of the real-time thread; only that thread touches it. */
+/* The real-time thread: the loop body (ndp_execloop.h) plus its clock. */
 typedef struct {
-  const exec_opts *opt;
+  ndp_execloop loop;
   exec_io *io;
-  uint64_t v_state, v_plan;     /* mailbox versions taken */
-  int have_state;               /* first robot state seen: nd_exec initialised */
-  double z;                     /* sphere height: the first measured ee z */
-  double t_state;               /* arrival of the newest robot state */
-  int pending;                  /* plan taken but not yet applied */
-  plan_in plan;
-  int have_plan;                /* a plan has been accepted */
-  double t_plan;                /* arrival of the newest accepted plan */
-  nd_exec ex;
-  int64_t seq;
-  nd_jitter jit;
-  double next_report;
-  rt_report rep;
-} exec_state;
-
-static void exec_state_init(exec_state *s, const exec_opts *opt, exec_io *io) {
-  memset(s, 0, sizeof(*s));
-  s->opt = opt;
-  s->io = io;
-  nd_jitter_reset(&s->jit);
-  s->rep.mode = -1;
-  s->rep.plan_id = -1;
-  s->rep.refused_id = -1;
-}
-
-/* Post the report: now if force, else when STATS_PERIOD has passed. */
-static void exec_report(exec_state *s, double now, int force) {
-  if (!force && now < s->next_report) return;
-  s->next_report = now + STATS_PERIOD;
-  s->rep.loop.p50_us = (int32_t)nd_jitter_quantile(&s->jit, 0.5);
-  s->rep.loop.p99_us = (int32_t)nd_jitter_quantile(&s->jit, 0.99);
-  s->rep.loop.max_us = (int32_t)s->jit.max_us;
-  nd_mailbox_post(&s->io->report, &s->rep, (int)sizeof(s->rep));
-}
-
-/* One cycle at monotonic time now (s), which is wall-clock time utime (us): take inputs,
- * apply a new plan, step the executor, commit the setpoint for that instant to the ring.
- * Returns 1 if a setpoint was committed, 0 before the first robot state, -1 if the ring
- * was full (counted by the ring). No allocation, no locks, no I/O. */
-static int exec_cycle(exec_state *s, double now, int64_t utime) {
-  const double timeout = s->opt->timeout;
-  int dirty = 0;
-  state_in st;
-  plan_in pl;
-  s->rep.cycles++;
-
-  if (nd_mailbox_take(&s->io->state, &s->v_state, &st, (int)sizeof(st)) == (int)sizeof(st)) {
-    if (!s->have_state) {
-      /* Nothing to command before we know where the robot is: start at rest there. */
-      nd_exec_init(&s->ex, st.ee_pos, now);
-      s->z = st.ee_pos[2];
-      s->have_state = 1;
-      dirty = 1;
-    }
-    s->t_state = st.t_arrive;
-  }
-  if (nd_mailbox_take(&s->io->plan, &s->v_plan, &pl, (int)sizeof(pl)) == (int)sizeof(pl)) {
-    s->plan = pl;
-    s->pending = 1;
-  }
-  if (!s->have_state) {
-    exec_report(s, now, dirty);
-    return 0;
-  }
-
-  const int state_stale = now - s->t_state > timeout;
-  /* A plan waits while the state is stale (it would be dropped again at once) and is
-   * applied when the state returns, if it is still fresh itself. */
-  if (s->pending && !state_stale) {
-    s->pending = 0;
-    if (now - s->plan.t_arrive <= timeout) {
-      const int rc = nd_exec_plan(&s->ex, &s->opt->cfg, now, s->plan.key, s->plan.T,
-                                  s->rep.refused_why, (int)sizeof(s->rep.refused_why));
-      if (rc == ND_EXEC_OK) {
-        s->have_plan = 1;
-        s->t_plan = s->plan.t_arrive;
-        s->rep.plan_id = s->plan.plan_id;
-        s->rep.plan_utime = s->plan.utime;
-        s->rep.accepted++;
-      } else {
-        /* A refused plan does not refresh the plan clock: a planner sending only
-         * unreachable plans must not keep the robot on its old segment. */
-        s->rep.refused++;
-        s->rep.refused_id = s->plan.plan_id;
-        dirty = 1;
-      }
-    } else {
-      s->rep.late++;
-    }
-  }
-
-  int stale = state_stale ? STALE_STATE : 0;
-  if (!s->have_plan) stale |= STALE_NO_PLAN;
-  else if (now - s->t_plan > timeout) stale |= STALE_PLAN;
-  if (!stale != !s->rep.stale || s->rep.mode < 0) {
-    if (stale) s->rep.n_stale++;
-    else s->rep.n_resume++;
-    dirty = 1;
-  }
-  s->rep.stale = stale;
-
-  double sp[2][4];
-  const int mode = nd_exec_step(&s->ex, &s->opt->cfg, now, stale != 0, sp);
-  if (mode != s->rep.mode) dirty = 1;
-  s->rep.mode = mode;
-
-  nudge_ee_cmd_t m;
-  m.utime = utime;
-  m.seq = s->seq++;
-  m.plan_id = s->rep.plan_id;
-  m.plan_utime = s->rep.plan_utime;
-  m.mode = (int8_t)mode;
-  for (int ax = 0; ax < 2; ax++) {
-    m.p[ax] = sp[ax][ND_P];
-    m.v[ax] = sp[ax][ND_V];
-    m.a[ax] = sp[ax][ND_A];
-  }
-  m.p[2] = s->z;
-  m.v[2] = m.a[2] = 0.0;
-
-  int ret = -1;
-  unsigned char *slot = nd_ring_reserve(&s->io->ring);
-  if (slot) {
-    /* A fixed-size type: encoding writes into the slot and allocates nothing. */
-    const int len = nudge_ee_cmd_t_encode(slot, 0, ND_RTIO_MAX, &m);
-    if (len > 0) {
-      nd_ring_commit(&s->io->ring, TAG_EE_CMD, len);
-      s->rep.sent++;
-      ret = 1;
-    }
-  }
-  exec_report(s, now, dirty);
-  return ret;
-}
+  double rate;
+} exec_thread;
 
 static int64_t ts_ns(const struct timespec *ts) {
   return (int64_t)ts->tv_sec * 1000000000 + ts->tv_nsec;
@@ -257,7 +81,8 @@ static struct timespec ns_ts(int64_t ns) {
  * advance *next_ns by a period, past every deadline already missed (a late loop skips
  * cycles rather than bursting to catch up: each setpoint is computed for the time it is
  * sent anyway). */
-static void exec_tick(exec_state *s, int64_t *next_ns, int64_t period_ns) {
+static void exec_tick(exec_thread *t, int64_t *next_ns, int64_t period_ns) {
+  ndp_execloop *s = &t->loop;
   struct timespec dl = ns_ts(*next_ns), now_ts;
   while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &dl, NULL) == EINTR) {
   }
@@ -267,10 +92,10 @@ static void exec_tick(exec_state *s, int64_t *next_ns, int64_t period_ns) {
   const int64_t utime = ndp_utime();
   const int64_t woke = ts_ns(&now_ts);
   nd_jitter_add(&s->jit, 1e-3 * (double)(woke - *next_ns), 1e-3 * (double)period_ns);
-  if (exec_cycle(s, 1e-9 * (double)woke, utime) > 0) {
+  if (ndp_execloop_cycle(s, 1e-9 * (double)woke, utime) > 0) {
     /* Non-blocking: a full counter (never, in practice) just means it is rung already. */
     const uint64_t one = 1;
-    if (write(s->io->bell, &one, sizeof one) < 0) {
+    if (write(t->io->bell, &one, sizeof one) < 0) {
     }
   }
   *next_ns += period_ns;
@@ -285,14 +110,14 @@ static void exec_tick(exec_state *s, int64_t *next_ns, int64_t period_ns) {
 }
 
 static void *rt_main(void *arg) {
-  exec_state *s = arg;
-  const int64_t period_ns = (int64_t)llround(1e9 / s->opt->rate);
+  exec_thread *t = arg;
+  const int64_t period_ns = (int64_t)llround(1e9 / t->rate);
   struct timespec ts;
   clock_gettime(CLOCK_MONOTONIC, &ts);
   int64_t next = ts_ns(&ts) + period_ns;
-  while (!atomic_load_explicit(&s->io->stop, memory_order_relaxed))
-    exec_tick(s, &next, period_ns);
-  exec_report(s, 1e-9 * (double)next, 1);
+  while (!atomic_load_explicit(&t->io->stop, memory_order_relaxed))
+    exec_tick(t, &next, period_ns);
+  ndp_execloop_report_post(&t->loop, 1e-9 * (double)next, 1);
   return NULL;
 }
 
@@ -319,10 +144,10 @@ static void on_state(const lcm_recv_buf_t *rbuf, const char *ch,
     ndp_refused(&c->log_state, PROG, "ROBOT_STATE", why);
     return;
   }
-  state_in in;
+  ndp_execloop_state_in in;
   in.t_arrive = ndp_sent_mono(msg->utime);
   memcpy(in.ee_pos, msg->ee_pos, sizeof in.ee_pos);
-  nd_mailbox_post(&c->io->state, &in, (int)sizeof(in));
+  nd_mailbox_post(&c->io->x.state, &in, (int)sizeof(in));
 }
 
 static void on_plan(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_plan_t *msg,
@@ -337,7 +162,7 @@ static void on_plan(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_plan
     ndp_refused(&c->log_plan, PROG, "PLAN", why);
     return;
   }
-  plan_in in;
+  ndp_execloop_plan_in in;
   in.t_arrive = ndp_sent_mono(msg->utime);
   in.plan_id = msg->plan_id;
   in.utime = msg->utime;
@@ -361,14 +186,14 @@ static void on_plan(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_plan
   }
   if (age > 0.5 * msg->T) age = 0.5 * msg->T;
   in.T = msg->T - age;
-  nd_mailbox_post(&c->io->plan, &in, (int)sizeof(in));
+  nd_mailbox_post(&c->io->x.plan, &in, (int)sizeof(in));
 }
 
 static void say_stale(int bits, double timeout) {
-  if (bits & STALE_STATE)
+  if (bits & NDP_STALE_STATE)
     fprintf(stderr, PROG ": stale: no ROBOT_STATE for %g s: braking to rest and holding\n",
             timeout);
-  else if (bits & STALE_NO_PLAN)
+  else if (bits & NDP_STALE_NO_PLAN)
     fprintf(stderr, PROG ": robot state received: holding there until a PLAN arrives\n");
   else
     fprintf(stderr, PROG ": stale: no PLAN for %g s: braking to rest and holding\n", timeout);
@@ -379,9 +204,9 @@ static void say_stale(int bits, double timeout) {
 static int publish_ring(lcm_t *lcm, io_ctx *c) {
   unsigned char buf[ND_RTIO_MAX];
   int tag, len, n = 0, bad = 0;
-  while ((len = nd_ring_pop(&c->io->ring, &tag, buf, sizeof buf)) >= 0) {
+  while ((len = nd_ring_pop(&c->io->x.ring, &tag, buf, sizeof buf)) >= 0) {
     n++;
-    if (tag != TAG_EE_CMD) continue;
+    if (tag != NDP_EXECLOOP_TAG_EE_CMD) continue;
     if (lcm_publish(lcm, NDP_CH_EE_CMD, buf, len) != 0) {
       bad = 1;
       continue;
@@ -492,7 +317,7 @@ static void go_realtime(pthread_t t) {
 }
 
 /* Print the loop's stale transitions and refused plans that are new since *last. */
-static void note_report(io_ctx *c, const rt_report *r, rt_report *last) {
+static void note_report(io_ctx *c, const ndp_execloop_report *r, ndp_execloop_report *last) {
   if (r->n_stale != last->n_stale || r->n_resume != last->n_resume) {
     const int64_t flips = (r->n_stale - last->n_stale) + (r->n_resume - last->n_resume);
     if (r->stale)
@@ -514,7 +339,7 @@ static void note_report(io_ctx *c, const rt_report *r, rt_report *last) {
 int main(int argc, char **argv) {
   static exec_opts opt;
   static exec_io io;
-  static exec_state rt;
+  static exec_thread rt;
   static io_ctx c;
   char err[512];
 
@@ -528,10 +353,7 @@ int main(int argc, char **argv) {
     return 1;
   }
 
-  nd_mailbox_init(&io.state);
-  nd_mailbox_init(&io.plan);
-  nd_mailbox_init(&io.report);
-  nd_ring_init(&io.ring);
+  ndp_execloop_io_init(&io.x);
   io.bell = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
   if (io.bell < 0) {
     fprintf(stderr, PROG ": eventfd: %s\n", strerror(errno));
@@ -539,7 +361,9 @@ int main(int argc, char **argv) {
     return 1;
   }
   atomic_store(&io.stop, 0);
-  exec_state_init(&rt, &opt, &io);
+  ndp_execloop_init(&rt.loop, &opt.cfg, opt.timeout, &io.x);
+  rt.io = &io;
+  rt.rate = opt.rate;
 
   c.io = &io;
   c.timeout = opt.timeout;
@@ -553,8 +377,6 @@ int main(int argc, char **argv) {
     lcm_destroy(lcm);
     return 1;
   }
-  /* lcm-gen computes a type's hash lazily on first use: do it here, not in the loop. */
-  (void)nudge_ee_cmd_t_encoded_size(&(nudge_ee_cmd_t){0});
 
   fprintf(stderr,
           PROG ": rate %g Hz, timeout %g s, v_max %g m/s, a_max %g m/s^2, j_max %g m/s^3, "
@@ -583,7 +405,7 @@ int main(int argc, char **argv) {
   }
   if (opt.rt) go_realtime(tid);
 
-  rt_report rep, last;
+  ndp_execloop_report rep, last;
   memset(&last, 0, sizeof last);
   last.mode = -1;
   ndp_loop_stats loop = {0, 0, 0, 0};
@@ -615,13 +437,13 @@ int main(int argc, char **argv) {
     const int np = publish_ring(lcm, &c);
     if (np < 0 && !pub_failing) fprintf(stderr, PROG ": lcm_publish of EE_CMD failed\n");
     pub_failing = np < 0;
-    if (nd_mailbox_take(&io.report, &v_rep, &rep, (int)sizeof rep) == (int)sizeof rep) {
+    if (nd_mailbox_take(&io.x.report, &v_rep, &rep, (int)sizeof rep) == (int)sizeof rep) {
       note_report(&c, &rep, &last);
       loop = rep.loop;
       c.st.state = rep.mode < 0 ? "waiting" : nd_exec_mode_name(rep.mode);
       c.st.rejected = c.log_state.count + c.log_plan.count + c.log_old.count + rep.refused;
     }
-    const uint64_t drops = atomic_load(&io.ring.dropped);
+    const uint64_t drops = atomic_load(&io.x.ring.dropped);
     if (drops != drops_seen) {
       fprintf(stderr, PROG ": %llu setpoints dropped: publishing fell behind the loop\n",
               (unsigned long long)(drops - drops_seen));
@@ -634,7 +456,7 @@ int main(int argc, char **argv) {
   atomic_store(&io.stop, 1);
   pthread_join(tid, NULL);
   publish_ring(lcm, &c);
-  if (nd_mailbox_take(&io.report, &v_rep, &rep, (int)sizeof rep) == (int)sizeof rep) {
+  if (nd_mailbox_take(&io.x.report, &v_rep, &rep, (int)sizeof rep) == (int)sizeof rep) {
     loop = rep.loop;
     c.st.state = rep.mode < 0 ? "waiting" : nd_exec_mode_name(rep.mode);
     c.st.rejected = c.log_state.count + c.log_plan.count + c.log_old.count + rep.refused;
@@ -644,12 +466,12 @@ int main(int argc, char **argv) {
   fprintf(stderr,
           PROG ": stopped after %lld cycles, %lld setpoints; period error p50 %d us, p99 %d "
                "us, max %d us; %lld overruns (%lld deadlines skipped); %llu ring drops; "
-               "max publish backlog %d; plans %lld taken, %lld refused, %lld stale on arrival, "
-               "%lld from an outdated state\n",
+               "max publish backlog %d; plans %lld taken (%lld re-sent the keypoint being "
+               "tracked), %lld refused, %lld stale on arrival, %lld from an outdated state\n",
           (long long)last.cycles, (long long)last.sent, loop.p50_us, loop.p99_us,
           loop.max_us, (long long)loop.overruns, (long long)last.missed,
           (unsigned long long)drops_seen, c.backlog_max, (long long)last.accepted,
-          (long long)last.refused, (long long)last.late,
+          (long long)last.kept, (long long)last.refused, (long long)last.late,
           (long long)c.log_old.count);
   close(io.bell);
   nudge_robot_state_t_unsubscribe(lcm, sub_state);

@@ -19,7 +19,18 @@
  * neighbours; a longer one, or more than FILL_MAX_FRAC of the steps filled, and the task
  * is not recorded (an interpolated second of pushing would be made-up data). The arrays
  * are allocated once for the longest task; the handlers only write into them; the
- * append (encode, one write, fdatasync) happens after the task. */
+ * append (encode, one write, fdatasync) happens after the task.
+ *
+ * A full or read-only file system (or an I/O error) does not stop the tasks: recording
+ * is what the runner does besides its job, and a robot mid-way through a chain of pushes
+ * should finish it. The failed append is reported with the file and the reason, the
+ * records already in the file stay as they were (nd_rfile cuts a partial write back),
+ * the next task tries again (reopening the file if needed), and the summary and the exit
+ * status (3) say how many tasks were lost. A buffer that is not ours to write (another
+ * recorder holds it, not a record file, no permission, no such directory) is refused at
+ * the start instead: that is a wrong argument, not a condition that may pass. */
+#define _GNU_SOURCE /* strerrorname_np */
+#include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -98,6 +109,9 @@ typedef struct {
   int32_t params_n;      /* rollouts the newest PARAMS was fitted on */
   int64_t appended;
   int last_ok;           /* the last task was appended */
+  int64_t failed;        /* finished rollouts whose append failed (file system, I/O) */
+  char last_err[600];    /* why the newest of them failed */
+  const char *path;      /* the buffer, also while it cannot be opened */
 } recorder;
 
 /* What the LCM handlers update. */
@@ -130,8 +144,22 @@ static void refuse(tasks_io *io, const char *what, const char *why) {
 
 /* ---- recording ---- */
 
+/* A condition of the file system that may pass while the runner works (full, over
+ * quota, read-only, failing): the tasks go on without recording. */
+static int storage_error(int e) {
+  return e == ENOSPC || e == EDQUOT || e == EROFS || e == EIO || e == EFBIG;
+}
+
+/* "ENOSPC" for ENOSPC: what people grep logs for; "" for 0. */
+static const char *errno_name(int e) {
+  const char *n = e ? strerrorname_np(e) : "";
+  return n ? n : "?";
+}
+
 /* Allocate the recorder for tasks of up to tau s at step dt and open the buffer (a second
- * writer is refused by its lock). Return 0, or -1 with a message. */
+ * writer is refused by its lock). A file system that refuses writes now (storage_error)
+ * is reported and leaves the buffer closed for the appends to retry. Return 0, or -1
+ * with a message. */
 static int rec_init(recorder *rc, const char *path, double tau, double dt,
                     const double theta[NDS_NTHETA], char *err, int errlen) {
   memset(rc, 0, sizeof(*rc));
@@ -150,8 +178,14 @@ static int rec_init(recorder *rc, const char *path, double tau, double dt,
     snprintf(err, errlen, "%s: out of memory for %d steps", path, rc->cap);
     return -1;
   }
+  rc->path = path;
   nd_rfile_tail repair;
   if (nd_rbuf_open(&rc->w, path, &repair, err, errlen)) {
+    if (storage_error(rc->w.sys_errno)) {
+      fprintf(stderr, PROG ": cannot record into %s now: %s [%s]; running the tasks anyway, "
+              "each one's append tries again\n", path, err, errno_name(rc->w.sys_errno));
+      return 0;
+    }
     if (strstr(err, "locked"))
       snprintf(err + strlen(err), errlen - strlen(err),
                ": another nudge-tasks is recording into it");
@@ -162,6 +196,22 @@ static int rec_init(recorder *rc, const char *path, double tau, double dt,
             nd_rfile_status_name(repair.status), repair.why);
   fprintf(stderr, PROG ": recording into %s (%lld rollouts there), up to %d steps of %g s\n",
           path, (long long)rc->w.records, rc->cap, dt);
+  return 0;
+}
+
+/* Open the buffer again if it is not open, or after a failed sync left the writer
+ * unusable (the reopen checks and repairs the tail). 0 when ready to append, or -1 with
+ * a message (rc->w.sys_errno says whether a system call failed). */
+static int rec_reopen(recorder *rc, char *err, int errlen) {
+  if (rc->w.fd >= 0 && !rc->w.broken) return 0;
+  nd_rfile_writer_close(&rc->w);
+  nd_rfile_tail repair;
+  if (nd_rbuf_open(&rc->w, rc->path, &repair, err, errlen)) return -1;
+  if (repair.status != ND_RFILE_END)
+    fprintf(stderr, PROG ": %s: cut off a %s tail: %s\n", rc->path,
+            nd_rfile_status_name(repair.status), repair.why);
+  fprintf(stderr, PROG ": %s is writable again: recording into it (%lld rollouts there)\n",
+          rc->path, (long long)rc->w.records);
   return 0;
 }
 
@@ -321,7 +371,8 @@ static void rec_finish(recorder *rc, int64_t id, int outcome) {
     rec_objects(rc);
     rc->r.n = rc->steps;
     char err[512];
-    const int ok = nd_rbuf_append(&rc->w, &rc->r, err, sizeof(err)) == 0;
+    const int ok = rec_reopen(rc, err, sizeof(err)) == 0 &&
+                   nd_rbuf_append(&rc->w, &rc->r, err, sizeof(err)) == 0;
     rc->r.n = rc->cap;
     if (ok) {
       rc->appended++;
@@ -332,7 +383,14 @@ static void rec_finish(recorder *rc, int64_t id, int outcome) {
               rc->w.path);
       return;
     }
-    snprintf(why, sizeof(why), "%s", err);
+    /* The rollout was sound; the file took none of it. */
+    rc->failed++;
+    if (rc->w.sys_errno)
+      snprintf(rc->last_err, sizeof(rc->last_err), "%s [%s]", err,
+               errno_name(rc->w.sys_errno));
+    else
+      snprintf(rc->last_err, sizeof(rc->last_err), "%s", err);
+    snprintf(why, sizeof(why), "%s", rc->last_err);
   }
   fprintf(stderr, PROG ": task %lld not recorded: %s\n", (long long)id, why);
 }
@@ -599,7 +657,9 @@ static void usage(FILE *f) {
           "  -h, --help          this text\n\n"
           "Prints one line per task, summary figures as 'name value unit' lines, and ends with\n"
           "'reached K/N goals'. Exit status: 0 every task ran (reached, timed out or rejected),\n"
-          "1 the tasks could not be run (no MOCAP, LCM failure), 2 bad arguments,\n"
+          "1 the tasks could not be run (no MOCAP, LCM failure), 2 bad arguments, 3 every\n"
+          "task ran but appending some to the --record buffer failed (disk full, read-only,\n"
+          "I/O error: the tasks go on, each failure is reported, earlier records stay intact),\n"
           "128+n when stopped by signal n (SIGINT: 130), after printing what ran.\n");
 }
 
@@ -821,7 +881,10 @@ int main(int argc, char **argv) {
   printf("tasks_reached %d count\n", reached);
   if (reached) printf("reach_time_mean %.3f s\n", t_sum / reached);
   if (attempted) printf("final_pos_err_mean %.4f m\n", pos_sum / attempted);
-  if (cfg.record) printf("tasks_recorded %lld count\n", (long long)rec.appended);
+  if (cfg.record) {
+    printf("tasks_recorded %lld count\n", (long long)rec.appended);
+    printf("tasks_record_failed %lld count\n", (long long)rec.failed);
+  }
   if (ndp_quit)
     printf("reached %d/%d goals (interrupted: %d of %d tasks ran)\n", reached, ran, ran,
            cfg.n);
@@ -829,6 +892,11 @@ int main(int argc, char **argv) {
     printf("reached %d/%d goals\n", reached, ran);
   fflush(stdout);
   status = ndp_quit ? 128 + ndp_quit : 0;
+  if (rec.failed) {
+    fprintf(stderr, PROG ": %lld task(s) not recorded: appending to %s failed; the last "
+            "error: %s\n", (long long)rec.failed, rec.path, rec.last_err);
+    if (status == 0) status = 3;
+  }
 done:
   if (status == 1 && ndp_quit) status = 128 + ndp_quit;
   nudge_mocap_t_unsubscribe(lcm, sub);

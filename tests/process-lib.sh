@@ -15,6 +15,7 @@ PT_NAME=${PT_NAME:-process-test}
 PT_FAILS=0
 PT_PIDS=()          # everything started, for the EXIT trap
 PT_LOGGER=""
+PT_ON_CLEANUP=()    # functions called at exit after the processes stop, before PT_WORK goes
 
 pt_say() { printf '%s: %s\n' "$PT_NAME" "$*"; }
 
@@ -31,6 +32,12 @@ pt_check() {
   shift
   if "$@"; then pt_ok "$what"; else pt_fail "$what"; fi
 }
+
+# pt_on_cleanup FUNCTION: call FUNCTION (a name, no arguments) at exit, after everything
+# started has stopped and before the work directory is removed: e.g. unmount what the test
+# mounted there, which rm -rf cannot remove. A function, not a string to eval, so no path
+# is pasted into shell code.
+pt_on_cleanup() { PT_ON_CLEANUP+=("$1"); }
 
 # pt_check_not DESCRIPTION COMMAND...: ok if COMMAND fails. (Instead of bash -c "! ...":
 # no path or value is ever pasted into a string a shell parses again.)
@@ -294,6 +301,8 @@ pt_cleanup() {
   if ((rc != 0 || PT_FAILS > 0)); then
     pt_dump_logs "$PT_WORK"/*/*.log "$PT_WORK"/*.out "$PT_WORK"/*.err
   fi
+  local c
+  for c in "${PT_ON_CLEANUP[@]}"; do "$c"; done
   if [[ -n ${PT_KEEP:-}${ND_KEEP:-} ]]; then
     pt_say "kept the work directory $PT_WORK (PT_KEEP)"
   elif [[ -n ${PT_WORK:-} && -d $PT_WORK ]]; then

@@ -424,6 +424,39 @@ static void test_resume(void **state) {
   assert_near(out[1][ND_V], key[3], 1e-5);
 }
 
+/* nd_exec_heading_to: true only while a tracking segment runs toward that very keypoint,
+ * also after the limits stretched it; not for another keypoint, after the segment's end,
+ * while braking or holding. */
+static void test_heading_to(void **state) {
+  (void)state;
+  const nd_exec_cfg cfg = nd_exec_cfg_default();
+  nd_exec ex;
+  const double p[2] = {0.06, -0.042}, key[4] = {0.085, -0.038, 0.25, 0.04};
+  const double far[4] = {0.45, 0.3, 0.2, 0.0};
+  char err[128];
+  double out[2][4];
+  nd_exec_init(&ex, p, 1.0);
+  assert_false(nd_exec_heading_to(&ex, 1.0, key, 1e-6));  /* holding */
+  assert_int_equal(nd_exec_plan(&ex, &cfg, 1.0, key, 0.25, err, sizeof err), ND_EXEC_OK);
+  assert_true(nd_exec_heading_to(&ex, 1.0, key, 1e-6));
+  assert_true(nd_exec_heading_to(&ex, 1.2, key, 1e-6));
+  for (int k = 0; k < 4; k++) {
+    double other[4];
+    memcpy(other, key, sizeof other);
+    other[k] += 1e-4;
+    assert_false(nd_exec_heading_to(&ex, 1.1, other, 1e-6));
+    assert_true(nd_exec_heading_to(&ex, 1.1, other, 2e-4));
+  }
+  assert_false(nd_exec_heading_to(&ex, 1.25, key, 1e-6));  /* the segment has ended */
+  /* Stretched by the limits: still heading there, until the stretched end. */
+  assert_int_equal(nd_exec_plan(&ex, &cfg, 1.0, far, 0.05, err, sizeof err), ND_EXEC_OK);
+  assert_true(ex.seg.T > 0.2);
+  assert_true(nd_exec_heading_to(&ex, 1.0 + 0.9 * ex.seg.T, far, 1e-6));
+  /* Going stale: braking, so a plan to the same keypoint must start a segment again. */
+  assert_int_equal(nd_exec_step(&ex, &cfg, 1.05, 1, out), ND_EXEC_STOPPING);
+  assert_false(nd_exec_heading_to(&ex, 1.05, far, 1e-6));
+}
+
 /* Bad plans are refused with a message and change nothing. */
 static void test_rejects(void **state) {
   (void)state;
@@ -487,6 +520,7 @@ int main(void) {
       cmocka_unit_test(test_random_switching),
       cmocka_unit_test(test_pushing_switching),
       cmocka_unit_test(test_resume),
+      cmocka_unit_test(test_heading_to),
       cmocka_unit_test(test_rejects),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);

@@ -649,6 +649,7 @@ static void test_bad_header(void **state) {
   spit(path, orig, 20);
   assert_int_equal(nd_rbuf_open(&w, path, NULL, err, sizeof err), -1);
   assert_non_null(strstr(err, "header truncated: 20 of 40"));
+  assert_int_equal(w.sys_errno, 0);  /* not a storage error: not a record file */
   unlink(path);
   assert_int_equal(nd_rbuf_reader_open(&rd, path, err, sizeof err), -1);
   assert_non_null(strstr(err, "No such file"));
@@ -841,6 +842,7 @@ static void test_second_writer_refused(void **state) {
   snprintf(want, sizeof want, "locked by another writer (pid %d)", (int)getpid());
   assert_int_equal(nd_rfile_open_append(&w2, path, ND_RFILE_KIND_ROLLOUTS, NULL, err, sizeof err), -1);
   if (!strstr(err, want) || !strstr(err, path)) fail_msg("'%s' lacks '%s'", err, want);
+  assert_int_equal(w2.sys_errno, 0);  /* not a storage error: another writer has it */
   /* from another process too */
   int fds[2];
   assert_int_equal(pipe(fds), 0);
@@ -962,7 +964,8 @@ static int drop_root(char *msg, int cap) {
 static int child_open(const char *path, char *msg, int cap) {
   if (drop_root(msg, cap)) return 3;
   nd_rfile_writer w;
-  return nd_rbuf_open(&w, path, NULL, msg, cap) == -1 ? 0 : 1;
+  if (nd_rbuf_open(&w, path, NULL, msg, cap) != -1) return 1;
+  return w.sys_errno == EACCES ? 0 : 5;  /* callers tell storage errors by it */
 }
 
 /* A file-size limit below the end of the next record: the write stops part-way. */
@@ -975,10 +978,10 @@ static int child_fsize(const char *path, char *msg, int cap) {
   if (setrlimit(RLIMIT_FSIZE, &lim)) return 2;
   static unsigned char p[20000];
   if (nd_rfile_append(&w, 7, p, sizeof p, msg, cap) != -1) return 3;
-  if (file_size(path) != end || w.end != end) return 4;
+  if (file_size(path) != end || w.end != end || w.sys_errno != EFBIG) return 4;
   /* the writer goes on once the record fits */
   char e2[256];
-  if (nd_rfile_append(&w, 7, p, 1000, e2, sizeof e2)) return 5;
+  if (nd_rfile_append(&w, 7, p, 1000, e2, sizeof e2) || w.sys_errno != 0) return 5;
   nd_rfile_writer_close(&w);
   return 0;
 }
@@ -998,9 +1001,10 @@ static int child_enospc(const char *dir, char *msg, int cap) {
   int ok = 0;
   while (ok < 100 && nd_rfile_append(&w, 7, p, sizeof p, err, sizeof err) == 0) ok++;
   const int64_t end = w.end;
+  const int why = w.sys_errno;
   nd_rfile_writer_close(&w);
   snprintf(msg, (size_t)cap, "%s", err);
-  if (ok == 0 || ok == 100 || file_size(path) != end) return 2;
+  if (ok == 0 || ok == 100 || file_size(path) != end || why != ENOSPC) return 2;
   nd_rfile_reader rd;
   nd_rfile_record rec;
   nd_rfile_tail t;
