@@ -84,6 +84,11 @@ void nd_exec_init(nd_exec *ex, const double p[2], double now);
 int nd_exec_plan(nd_exec *ex, const nd_exec_cfg *cfg, double now, const double key[4],
                  double T, char *err, int errlen);
 
+/* A keypoint within this (m, m/s, per component) of the one the running segment is
+ * heading for is that keypoint re-sent: the planner found nothing better and published its
+ * previous best again, bit for bit. Anything its search changes moves by centimetres. */
+#define ND_EXEC_SAME_KEY 1e-6
+
 /* 1 if ex is on a tracking segment that has not ended at now and that ends at key =
  * (x, y, vx, vy), each component within tol (m, m/s): a plan re-sending that keypoint
  * asks for nothing the segment is not doing already. 0 otherwise (stopping, holding). */

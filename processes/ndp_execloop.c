@@ -72,7 +72,7 @@ int ndp_execloop_cycle(ndp_execloop *s, double now, int64_t utime) {
        * nothing better, the robot at rest) would hold the robot still for good: the first
        * 50 ms of a segment that has to arrive fast may go nowhere, and the next plan
        * starts it again from there. So the segment goes on, and the plan only renews it. */
-      const int same = nd_exec_heading_to(&s->ex, now, s->plan.key, NDP_EXECLOOP_SAME_KEY);
+      const int same = nd_exec_heading_to(&s->ex, now, s->plan.key, ND_EXEC_SAME_KEY);
       const int rc =
           same ? ND_EXEC_OK
                : nd_exec_plan(&s->ex, &s->cfg, now, s->plan.key, s->plan.T,

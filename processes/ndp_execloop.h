@@ -22,10 +22,6 @@
 #include "ndp.h"
 
 #define NDP_EXECLOOP_REPORT_PERIOD 0.1  /* s between routine report posts */
-/* A plan whose keypoint is within this (m, m/s, per component) of the one the segment is
- * heading for re-sends it: the planner found nothing better and published its previous
- * best again, bit for bit. Anything its search changes moves by centimetres. */
-#define NDP_EXECLOOP_SAME_KEY 1e-6
 
 /* Newest robot state: only what the loop needs, stamped with when it was sent. */
 typedef struct {
@@ -110,7 +106,7 @@ void ndp_execloop_init(ndp_execloop *s, const nd_exec_cfg *cfg, double timeout,
 /* One cycle at monotonic time now (s), which is wall-clock time utime (us): take inputs,
  * apply a new plan, step the executor, commit the setpoint for that instant to the ring.
  * A new plan starts a new segment from the current setpoint, except one that re-sends
- * the keypoint the running segment is heading for (NDP_EXECLOOP_SAME_KEY): that segment
+ * the keypoint the running segment is heading for (ND_EXEC_SAME_KEY): that segment
  * goes on, so the keypoint stays due when it was first due.
  * Returns 1 if a setpoint was committed, 0 before the first robot state, -1 if the ring
  * was full (counted by the ring). No allocation, no locks, no I/O. */
