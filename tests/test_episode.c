@@ -5,45 +5,21 @@
 #include <stdlib.h>
 
 #include "nds_episode.h"
+#include "nds_tfx.h"
 
-typedef struct {
-  nds_model world, plan;
-  nd_pool *pool;
-  nds_planner *planner;
-  mjData *d;
-} fixture;
+typedef nds_tfx fixture;
 
 static int setup(void **state) {
-  char err[256];
   fixture *f = calloc(1, sizeof(*f));
-  nds_scene_cfg wc, pc;
-  nds_scene_cfg_default(&wc);
-  pc = wc;
-  pc.timestep = 0.005;
-  assert_int_equal(nds_model_init(&f->world, &wc, err, sizeof(err)), 0);
-  assert_int_equal(nds_model_init(&f->plan, &pc, err, sizeof(err)), 0);
-  f->pool = nd_pool_create(2, err, sizeof(err));
-  assert_non_null(f->pool);
-  nds_planner_cfg cfg;
-  nds_planner_cfg_default(&cfg);
-  cfg.pop = 32;
-  cfg.iters = 2;
-  cfg.seed = 3;
-  f->planner = nds_planner_create(&f->plan, &cfg, f->pool, err, sizeof(err));
-  assert_non_null(f->planner);
-  f->d = mj_makeData(f->world.m);
+  assert_non_null(f);
+  nds_tfx_init(f, 3);
   *state = f;
   return 0;
 }
 
 static int teardown(void **state) {
-  fixture *f = *state;
-  mj_deleteData(f->d);
-  nds_planner_free(f->planner);
-  nd_pool_free(f->pool);
-  nds_model_free(&f->plan);
-  nds_model_free(&f->world);
-  free(f);
+  nds_tfx_free(*state);
+  free(*state);
   return 0;
 }
 

@@ -6,49 +6,28 @@
 
 #include "nd_test.h"
 #include "nds_episode.h"
+#include "nds_tfx.h"
 #include "nds_record.h"
 #include "nds_replay.h"
 
 typedef struct {
-  nds_model world, plan;
-  nd_pool *pool;
-  nds_planner *planner;
-  mjData *d;
+  nds_tfx x;
   nds_state start;
 } fixture;
 
 static int setup(void **state) {
-  char err[256];
   fixture *f = calloc(1, sizeof(*f));
-  nds_scene_cfg wc, pc;
-  nds_scene_cfg_default(&wc);
-  pc = wc;
-  pc.timestep = 0.005;
-  assert_int_equal(nds_model_init(&f->world, &wc, err, sizeof(err)), 0);
-  assert_int_equal(nds_model_init(&f->plan, &pc, err, sizeof(err)), 0);
-  f->pool = nd_pool_create(2, err, sizeof(err));
-  assert_non_null(f->pool);
-  nds_planner_cfg cfg;
-  nds_planner_cfg_default(&cfg);
-  cfg.pop = 32;
-  cfg.iters = 2;
-  cfg.seed = 5;
-  f->planner = nds_planner_create(&f->plan, &cfg, f->pool, err, sizeof(err));
-  assert_non_null(f->planner);
-  f->d = mj_makeData(f->world.m);
+  assert_non_null(f);
+  nds_tfx_init(&f->x, 5);
   const double ee0[2] = {-0.10, 0.0};
-  nds_state_rest(&f->world, 0.0, 0.0, 0.0, ee0, &f->start);
+  nds_state_rest(&f->x.world, 0.0, 0.0, 0.0, ee0, &f->start);
   *state = f;
   return 0;
 }
 
 static int teardown(void **state) {
   fixture *f = *state;
-  mj_deleteData(f->d);
-  nds_planner_free(f->planner);
-  nd_pool_free(f->pool);
-  nds_model_free(&f->plan);
-  nds_model_free(&f->world);
+  nds_tfx_free(&f->x);
   free(f);
   return 0;
 }
@@ -59,9 +38,9 @@ static void episode(fixture *f, double tau, const nd_goal *g, nds_record *rec,
   nds_episode_cfg ec;
   nds_episode_cfg_default(&ec);
   ec.tau = tau;
-  nds_planner_reset(f->planner);
-  const nds_planner_cfg *pc = nds_planner_config(f->planner);
-  if (nds_episode_run(&f->world, f->d, f->planner, &pc->ctrl, &ec, &f->start, g,
+  nds_planner_reset(f->x.planner);
+  const nds_planner_cfg *pc = nds_planner_config(f->x.planner);
+  if (nds_episode_run(&f->x.world, f->x.d, f->x.planner, &pc->ctrl, &ec, &f->start, g,
                       nds_record_hook, rec, o, err, sizeof(err)))
     fail_msg("episode: %s", err);
 }
@@ -78,7 +57,7 @@ static void test_record_replays_exactly(void **state) {
   assert_int_equal(nds_record_init(&rec, 1.5, 0.001, err, sizeof(err)), 0);
   assert_true(rec.cap >= 1501 && rec.cap <= 1502);  /* k dt <= tau: k = 0..1500, + rounding */
   const double theta[NDS_NTHETA] = {0.8, 0.004, 2e-4, 1.0};
-  assert_int_equal(nds_record_begin(&rec, &f->world, &f->start, 42, 1700000000000000LL, &g,
+  assert_int_equal(nds_record_begin(&rec, &f->x.world, &f->start, 42, 1700000000000000LL, &g,
                                     theta, err, sizeof(err)), 0);
   nds_episode_out o;
   episode(f, 1.5, &g, &rec, &o);
@@ -99,7 +78,7 @@ static void test_record_replays_exactly(void **state) {
   assert_true(fabs(r->obj[3 * r->n - 1]) > 0.05);                                 /* turned */
 
   nds_model nm;
-  assert_int_equal(nds_model_copy(&nm, &f->world, err, sizeof(err)), 0);
+  assert_int_equal(nds_model_copy(&nm, &f->x.world, err, sizeof(err)), 0);
   mjData *d = mj_makeData(nm.m);
   double *pred = malloc(sizeof(double) * NDS_REPLAY_PRED_COLS * r->n);
   const int modes[2] = {NDS_REPLAY_FORCE, NDS_REPLAY_SETPOINT};
@@ -154,10 +133,10 @@ static void test_record_bounds(void **state) {
   assert_int_equal(nds_record_init(&rec, 0.1, 0.001, err, sizeof(err)), 0);
   assert_int_equal(nds_record_finish(&rec, ND_OUTCOME_SUCCESS, err, sizeof(err)), -1);
   assert_non_null(strstr(err, "without begin"));
-  assert_int_equal(nds_record_begin(&rec, &f->plan, &f->start, 1, 0, &g, theta, err,
+  assert_int_equal(nds_record_begin(&rec, &f->x.plan, &f->start, 1, 0, &g, theta, err,
                                     sizeof(err)), -1);
   assert_non_null(strstr(err, "timestep"));
-  assert_int_equal(nds_record_begin(&rec, &f->world, &f->start, 1, 0, &g, theta, err,
+  assert_int_equal(nds_record_begin(&rec, &f->x.world, &f->start, 1, 0, &g, theta, err,
                                     sizeof(err)), 0);
   nds_episode_out o;
   episode(f, 0.3, &g, &rec, &o);
@@ -169,7 +148,7 @@ static void test_record_bounds(void **state) {
   assert_non_null(strstr(err, want));
   assert_true(rec.cap < 105 && o.t_end > 0.29);
   /* Begin again: no step recorded yet, so finishing now is refused as empty. */
-  assert_int_equal(nds_record_begin(&rec, &f->world, &f->start, 2, 0, &g, theta, err,
+  assert_int_equal(nds_record_begin(&rec, &f->x.world, &f->start, 2, 0, &g, theta, err,
                                     sizeof(err)), 0);
   assert_int_equal(rec.r.n, 0);
   assert_int_equal(nds_record_finish(&rec, ND_OUTCOME_TIMEOUT, err, sizeof(err)), -1);
@@ -179,7 +158,7 @@ static void test_record_bounds(void **state) {
   assert_int_equal(nds_record_init(&rec, 0, 0.001, err, sizeof(err)), -1);
   assert_int_equal(nds_record_init(&rec, 1e6, 0.001, err, sizeof(err)), -1);
   assert_non_null(strstr(err, "limit"));
-  assert_int_equal(nds_record_begin(&rec, &f->world, &f->start, 1, 0, &g, theta, err,
+  assert_int_equal(nds_record_begin(&rec, &f->x.world, &f->start, 1, 0, &g, theta, err,
                                     sizeof(err)), -1);
 }
 
