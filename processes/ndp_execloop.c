@@ -98,6 +98,7 @@ int ndp_execloop_cycle(ndp_execloop *s, double now, int64_t utime) {
         s->rep.refused++;
         s->rep.refused_box += rc == ND_EXEC_EBOX;
         s->rep.refused_id = s->plan.plan_id;
+        s->rep.refused_rc = rc;
         dirty = 1;
       }
     } else {

@@ -58,6 +58,7 @@ typedef struct {
   int64_t kept;             /* of the accepted: re-sent keypoints, their segment kept */
   int64_t late;             /* plans already stale when the loop took them: dropped */
   int64_t refused_id;       /* plan_id of the last refused plan */
+  int refused_rc;           /* its ND_EXEC_* code (ND_EXEC_EBOX: the workspace) */
   char refused_why[160];    /* nd_exec's reason for it */
   int64_t plan_id;          /* plan being followed, -1 before the first */
   int64_t plan_utime;       /* its utime, 0 before the first */

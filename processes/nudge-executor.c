@@ -132,6 +132,7 @@ typedef struct {
   ndp_status st;
   int backlog_max;     /* most setpoints found waiting in the ring at once */
   ndp_ratelog log_state, log_plan, log_exec;  /* refused inputs; plans nd_exec refused */
+  ndp_ratelog log_box;                        /* of those: for the workspace */
   ndp_ratelog log_old;                        /* plans made from a state too old */
 } io_ctx;
 
@@ -345,7 +346,9 @@ static void note_report(io_ctx *c, const ndp_execloop_report *r, ndp_execloop_re
   if (r->refused != last->refused) {
     char why[200];
     snprintf(why, sizeof why, "plan %lld: %s", (long long)r->refused_id, r->refused_why);
-    ndp_refused(&c->log_exec, PROG, "plan", why);
+    /* Apart from the limits' refusals, so a planner often refused for those cannot
+     * silence the first reports of plans outside the workspace. */
+    ndp_refused(r->refused_rc == ND_EXEC_EBOX ? &c->log_box : &c->log_exec, PROG, "plan", why);
   }
   *last = *r;
 }
