@@ -380,6 +380,7 @@ static void usage(FILE *f) {
           "                     on with the last valid command, then holds. Default\n"
           "                     %g,%g,%g,%g, nudge-planner's keypoint box; give\n"
           "                     nudge-executor and nudge-planner the same --workspace\n"
+          "                     (nudge-up --workspace does)\n"
           "  --model FILE       MJCF with bodies \"object\" (free joint) and \"ee\" (slide\n"
           "                     joints \"ee_x\", \"ee_y\") instead of the built-in scene\n"
           "  --seconds S        run S seconds, then exit 0 (default: until SIGINT/SIGTERM)\n"

@@ -72,7 +72,8 @@ static void usage(FILE *f) {
           "                       box in metres the keypoints are drawn in (default\n"
           "                       %g,%g,%g,%g); nudge-executor refuses plans with a keypoint\n"
           "                       outside its own --workspace, nudge-bridge commands beyond\n"
-          "                       its own: give all three the same box\n"
+          "                       its own: give all three the same box (nudge-up\n"
+          "                       --workspace does)\n"
           "  -h, --help           this text\n",
           NDP_DEFAULT_URL, d.ws_lo[0], d.ws_lo[1], d.ws_hi[0], d.ws_hi[1]);
 }
