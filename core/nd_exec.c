@@ -18,7 +18,20 @@
  * linear interpolation of its samples by at most h^2/8 max|f''|, and the norm of a
  * linear interpolant is at most its larger end. Chained from the 7th derivative (a
  * constant) down to the velocity, this bounds speed, acceleration and jerk everywhere
- * on [0, T], at a cost of a percent or two of conservatism with 64 samples. */
+ * on [0, T], at a cost of a percent or two of conservatism with 64 samples.
+ *
+ * The workspace is enforced by refusing, not by clamping the setpoint. A min-snap segment
+ * between keypoints inside the box can overshoot it (arriving fast, or turning), and a
+ * brake from a keypoint moving outward travels 15/16 v^2 / a_max beyond it (7 cm at
+ * 1 m/s). Clamping the position would cut p loose from v and a, which still carry the
+ * motion: the setpoint would stop at the wall in one tick, a step the limits exist to
+ * forbid, and the tracking controller would fight a command that contradicts itself. So
+ * each piece is checked once, where it is built: its position range follows from the
+ * same samples plus h^2/8 a_max between them (its acceleration is certified below a_max),
+ * and a plan whose segment or brake leaves the box plus margin is refused like one that
+ * breaks the limits: the committed trajectory goes on, and stale inputs bring it to rest
+ * within the margin. The 1 kHz step pays nothing for it, except on going stale, when the
+ * few brake candidates each get the same range check. */
 #include "nd_exec.h"
 
 #include <math.h>
@@ -43,6 +56,9 @@ nd_exec_cfg nd_exec_cfg_default(void) {
   c.t_max = 2.0;
   c.stretch = 1.1;
   c.n_check = 64;
+  c.ws_lo[0] = c.ws_lo[1] = ND_EXEC_WS_LO;
+  c.ws_hi[0] = c.ws_hi[1] = ND_EXEC_WS_HI;
+  c.ws_margin = ND_EXEC_WS_MARGIN;
   return c;
 }
 
@@ -58,6 +74,11 @@ int nd_exec_cfg_check(const nd_exec_cfg *cfg, char *err, int errlen) {
     msg = "stretch must be finite and > 1";
   else if (cfg->n_check < 2 || cfg->n_check > 100000)
     msg = "n_check must be in [2, 100000]";
+  else if (!nd_all_finite(cfg->ws_lo, 2) || !nd_all_finite(cfg->ws_hi, 2) ||
+           !(cfg->ws_lo[0] < cfg->ws_hi[0]) || !(cfg->ws_lo[1] < cfg->ws_hi[1]))
+    msg = "the workspace needs finite bounds with lo < hi on x and y";
+  else if (!isfinite(cfg->ws_margin) || cfg->ws_margin < 0.0)
+    msg = "the workspace margin must be finite and >= 0";
   if (!msg) return ND_EXEC_OK;
   if (err && errlen > 0) snprintf(err, (size_t)errlen, "nd_exec: %s", msg);
   return ND_EXEC_EINVAL;
@@ -136,6 +157,57 @@ static double seg_load(const nd_exec_cfg *cfg, const nd_snap_seg *seg, double *e
   if (est) *est = fmax(rv, fmax(sqrt(ra), cbrt(rj)));
   const double r = fmax(rv, fmax(ra, rj));
   return isfinite(r) ? r : INFINITY;
+}
+
+/* ---- workspace --------------------------------------------------------------------- */
+
+/* Range of positions over [0, seg->T] per axis into lo[2], hi[2]: n samples widened by
+ * the most a curve with |p''| <= a_bound can leave the chord between two of them. */
+static void seg_range(const nd_snap_seg *seg, int n, double a_bound, double lo[2],
+                      double hi[2]) {
+  const double T = seg->T, h = T / (double)n, w = h * h / 8.0 * a_bound;
+  for (int ax = 0; ax < 2; ax++) lo[ax] = INFINITY, hi[ax] = -INFINITY;
+  for (int i = 0; i <= n; i++) {
+    const double t = i < n ? (double)i * h : T;
+    for (int ax = 0; ax < 2; ax++) {
+      const double *c = seg->c[ax];
+      double p = 0.0;
+      for (int k = 7; k >= 0; k--) p = p * t + c[k];
+      if (p < lo[ax]) lo[ax] = p;
+      if (p > hi[ax]) hi[ax] = p;
+    }
+  }
+  for (int ax = 0; ax < 2; ax++) lo[ax] -= w, hi[ax] += w;
+}
+
+/* How far (m) a committed piece (limits already certified) gets beyond the workspace plus
+ * margin: <= 0 inside. *axis, *at: the worst axis and the position it reaches there. */
+static double seg_outside(const nd_exec_cfg *cfg, const nd_snap_seg *seg, int *axis,
+                          double *at) {
+  double lo[2], hi[2], worst = -INFINITY;
+  seg_range(seg, cfg->n_check, cfg->a_max, lo, hi);
+  for (int ax = 0; ax < 2; ax++) {
+    const double below = (cfg->ws_lo[ax] - cfg->ws_margin) - lo[ax];
+    const double above = hi[ax] - (cfg->ws_hi[ax] + cfg->ws_margin);
+    if (below > worst) worst = below, *axis = ax, *at = lo[ax];
+    if (above > worst) worst = above, *axis = ax, *at = hi[ax];
+  }
+  return isfinite(worst) ? worst : INFINITY;
+}
+
+int nd_exec_keys_check(const nd_exec_cfg *cfg, const double (*keys)[4], int n, char *err,
+                       int errlen) {
+  for (int k = 0; k < n; k++) {
+    const double x = keys[k][0], y = keys[k][1];
+    if (x >= cfg->ws_lo[0] && x <= cfg->ws_hi[0] && y >= cfg->ws_lo[1] && y <= cfg->ws_hi[1])
+      continue;
+    if (err && errlen > 0)
+      snprintf(err, (size_t)errlen, "nd_exec: keypoint %d (%.3f, %.3f) is outside the "
+               "workspace x [%.3f, %.3f], y [%.3f, %.3f] m", k, x, y, cfg->ws_lo[0],
+               cfg->ws_hi[0], cfg->ws_lo[1], cfg->ws_hi[1]);
+    return ND_EXEC_EBOX;
+  }
+  return ND_EXEC_OK;
 }
 
 /* ---- segment construction ---------------------------------------------------------- */
@@ -286,6 +358,8 @@ int nd_exec_plan(nd_exec *ex, const nd_exec_cfg *cfg, double now, const double k
                vk, cfg->v_max);
     return ND_EXEC_ELIMIT;
   }
+  if (nd_exec_keys_check(cfg, (const double(*)[4])key, 1, err, errlen) != ND_EXEC_OK)
+    return ND_EXEC_EBOX;
   if (now < ex->t_last) now = ex->t_last;
 
   const double p1[2] = {key[0], key[1]}, v1[2] = {key[2], key[3]};
@@ -314,6 +388,18 @@ int nd_exec_plan(nd_exec *ex, const nd_exec_cfg *cfg, double now, const double k
                "the limits");
     return ND_EXEC_ELIMIT;
   }
+  int axis = 0;
+  double at = 0.0;
+  const nd_snap_seg *piece[2] = {&seg, &brake};
+  for (int i = 0; i < 2; i++) {
+    if (!(seg_outside(cfg, piece[i], &axis, &at) > 0.0)) continue;
+    if (err && errlen > 0)
+      snprintf(err, (size_t)errlen, "nd_exec: the %s to keypoint (%.3f, %.3f) reaches %c = "
+               "%.3f m, beyond the workspace [%.3f, %.3f] m plus its %.3f m margin",
+               i ? "brake after the segment" : "segment", key[0], key[1], "xy"[axis], at,
+               cfg->ws_lo[axis], cfg->ws_hi[axis], cfg->ws_margin);
+    return ND_EXEC_EBOX;
+  }
   ex->mode = ND_EXEC_TRACK;
   ex->t_last = now;
   ex->seg = seg;
@@ -337,8 +423,10 @@ int nd_exec_heading_to(const nd_exec *ex, double now, const double key[4], doubl
 
 /* Commit to rest from time t on the tracking segment: of a few candidate departures
  * from t to the segment's end (where the brake planned with the segment is the last
- * candidate, always feasible), take the one that reaches rest first. Reaching rest
- * first, not departing first, is what keeps a robot with stale inputs safe. */
+ * candidate, always feasible and inside the workspace margin), take the one that reaches
+ * rest first and stays within the margin. Reaching rest first, not departing first, is
+ * what keeps a robot with stale inputs safe; an early brake toward the wall at speed
+ * would stop beyond where the planned one does. */
 static void begin_stop(nd_exec *ex, const nd_exec_cfg *cfg, double t) {
   const double t_end = ex->t_brake;
   double best = t_end + ex->brake.T;
@@ -348,7 +436,10 @@ static void begin_stop(nd_exec *ex, const nd_exec_cfg *cfg, double t) {
     nd_snap_seg brake;
     if (td >= best) break;
     nd_snap_seg_eval(&ex->seg, td - ex->t_seg, s);
-    if (brake_fit(cfg, s, &brake, hold) == 0 && td + brake.T < best) {
+    int axis;
+    double at;
+    if (brake_fit(cfg, s, &brake, hold) == 0 && td + brake.T < best &&
+        !(seg_outside(cfg, &brake, &axis, &at) > 0.0)) {
       best = td + brake.T;
       ex->brake = brake;
       ex->t_brake = td;

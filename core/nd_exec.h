@@ -19,6 +19,11 @@
  * conservatism, so a speed exactly at v_max cannot be certified: keypoint speeds within
  * ~0.1% of v_max are refused (ND_EXEC_ELIMIT), and emitted speeds stay just below it.
  *
+ * Workspace: keypoints must lie in a box, and every committed piece (tracking segment and
+ * its brake, and a brake begun when the inputs go stale) must stay within the box plus a
+ * margin, bounded in continuous time like the limits. A plan that breaks either is
+ * refused (ND_EXEC_EBOX), never clipped: see nd_exec.c for why.
+ *
  * Times are seconds on one monotonic clock (the caller's); positions metres. */
 #ifndef ND_EXEC_H
 #define ND_EXEC_H
@@ -35,7 +40,17 @@ typedef struct {
   double t_max;        /* longest tracking or brake segment, s; beyond it: rejected */
   double stretch;      /* factor (> 1) by which a segment's duration grows per try */
   int    n_check;      /* samples per limit check (>= 2) */
+  double ws_lo[2];     /* workspace box, m: lower x, y bounds of every keypoint */
+  double ws_hi[2];     /* upper x, y bounds (> ws_lo) */
+  double ws_margin;    /* m (>= 0): how far the trajectory may leave the box between and
+                        * beyond keypoints (a segment's overshoot, a brake's travel) */
 } nd_exec_cfg;
+
+/* The default workspace: the planner's keypoint box (sim/nds_planner.c), and the room
+ * its trajectories need beyond it (nd_exec.c says how much that is). */
+#define ND_EXEC_WS_LO (-0.5)
+#define ND_EXEC_WS_HI 0.5
+#define ND_EXEC_WS_MARGIN 0.04
 
 /* Modes, as in nudge_ee_cmd_t.mode. */
 enum {
@@ -48,7 +63,8 @@ enum {
 enum {
   ND_EXEC_OK = 0,
   ND_EXEC_EINVAL = -1, /* non-finite input or T <= 0 */
-  ND_EXEC_ELIMIT = -2  /* no duration up to t_max keeps the segment within the limits */
+  ND_EXEC_ELIMIT = -2, /* no duration up to t_max keeps the segment within the limits */
+  ND_EXEC_EBOX = -3    /* a keypoint outside the workspace, or a trajectory leaving its margin */
 };
 
 /* Mutable state; one per executor, plain data (copyable). Read-only for callers. */
@@ -64,10 +80,11 @@ typedef struct {
 } nd_exec;
 
 /* Defaults: Panda Cartesian limits 1.7 m/s, 13 m/s^2, 6500 m/s^3; t_min 0.01 s,
- * t_max 2 s, stretch 1.1, n_check 64. */
+ * t_max 2 s, stretch 1.1, n_check 64; workspace [-0.5, 0.5]^2 m, margin 0.04 m. */
 nd_exec_cfg nd_exec_cfg_default(void);
 
-/* Check cfg (finite positive limits, t_min < t_max, stretch > 1, n_check >= 2).
+/* Check cfg (finite positive limits, t_min < t_max, stretch > 1, n_check >= 2, a finite
+ * workspace with lo < hi, margin finite and >= 0).
  * Returns ND_EXEC_OK or ND_EXEC_EINVAL with a message in err. */
 int nd_exec_cfg_check(const nd_exec_cfg *cfg, char *err, int errlen);
 
@@ -80,9 +97,15 @@ void nd_exec_init(nd_exec *ex, const double p[2], double now);
  * stretched (by cfg->stretch steps, from at least t_min) until the segment and its
  * brake to rest at the end stay within the limits. Returns ND_EXEC_OK (mode TRACK,
  * ex->seg.T the duration used), or a negative code with a message in err and ex
- * unchanged. O(log(t_max / T) * n_check). */
+ * unchanged: ND_EXEC_EBOX if key lies outside the workspace or the segment or its brake
+ * leaves the workspace plus margin. O(log(t_max / T) * n_check). */
 int nd_exec_plan(nd_exec *ex, const nd_exec_cfg *cfg, double now, const double key[4],
                  double T, char *err, int errlen);
+
+/* Plan acceptance by workspace: ND_EXEC_OK if each of the n keypoints (x, y, vx, vy)
+ * lies in the box (bounds included), else ND_EXEC_EBOX naming the first outside and the box. */
+int nd_exec_keys_check(const nd_exec_cfg *cfg, const double (*keys)[4], int n, char *err,
+                       int errlen);
 
 /* A keypoint within this (m, m/s, per component) of the one the running segment is
  * heading for is that keypoint re-sent: the planner found nothing better and published its
@@ -97,7 +120,7 @@ int nd_exec_heading_to(const nd_exec *ex, double now, const double key[4], doubl
 /* Setpoint at time now into out[axis][p, v, a, j]; returns the mode. If stale is
  * nonzero in mode TRACK, commits to stopping: of a few candidate brake departures from
  * now to the segment's end (usually now wins), the one reaching rest first within the
- * limits; rest is reached at the latest when the brake planned at the end would. A non-finite now or one before the last call is treated as the
+ * limits and the workspace margin; rest is reached at the latest when the brake planned at the end would. A non-finite now or one before the last call is treated as the
  * last call's time. No allocation; O(1) except the one brake search when going stale. */
 int nd_exec_step(nd_exec *ex, const nd_exec_cfg *cfg, double now, int stale,
                  double out[2][4]);

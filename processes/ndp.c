@@ -12,6 +12,8 @@
 
 #include <mujoco/mujoco.h>
 
+#include "nd_parse.h"
+#include "ndp_validate.h"
 #include "nudge/nudge_status_t.h"
 
 volatile sig_atomic_t ndp_quit = 0;
@@ -164,5 +166,18 @@ int ndp_handle(lcm_t *lcm, double timeout_s) {
   int rc = lcm_handle_timeout(lcm, ms);
   if (rc < 0 && errno != EINTR) return -1;
   if (rc > 0) ndp_drain(lcm);
+  return 0;
+}
+
+int ndp_parse_workspace(const char *s, const char *what, double lo[2], double hi[2],
+                        char *err, int errlen) {
+  double b[4];
+  if (nd_parse_list(s, what, 4, -NDP_MAX_POS, NDP_MAX_POS, b, err, errlen)) return -1;
+  if (!(b[0] < b[2]) || !(b[1] < b[3])) {
+    snprintf(err, errlen, "%s: '%s' is not a box XLO,YLO,XHI,YHI with XLO < XHI and "
+             "YLO < YHI", what, s);
+    return -1;
+  }
+  lo[0] = b[0], lo[1] = b[1], hi[0] = b[2], hi[1] = b[3];
   return 0;
 }

@@ -107,6 +107,12 @@ int ndp_default_threads(void);
  * -1 when the kernel refused, with a message. Either way the caller can go on. */
 int ndp_lock_memory(char *err, int errlen);
 
+/* Parse a workspace box "XLO,YLO,XHI,YHI" (m) given to option what: four finite numbers
+ * within NDP_MAX_POS with lo < hi on each axis. Return 0 with lo[2], hi[2] set, or -1
+ * with a message naming the option. */
+int ndp_parse_workspace(const char *s, const char *what, double lo[2], double hi[2],
+                        char *err, int errlen);
+
 /* Drain every queued message without blocking (LCM's queues drop the newest when full). */
 void ndp_drain(lcm_t *lcm);
 

@@ -72,11 +72,19 @@ int ndp_execloop_cycle(ndp_execloop *s, double now, int64_t utime) {
        * nothing better, the robot at rest) would hold the robot still for good: the first
        * 50 ms of a segment that has to arrive fast may go nowhere, and the next plan
        * starts it again from there. So the segment goes on, and the plan only renews it. */
-      const int same = nd_exec_heading_to(&s->ex, now, s->plan.key, ND_EXEC_SAME_KEY);
-      const int rc =
-          same ? ND_EXEC_OK
-               : nd_exec_plan(&s->ex, &s->cfg, now, s->plan.key, s->plan.T,
-                              s->rep.refused_why, (int)sizeof(s->rep.refused_why));
+      const double *key = s->plan.keys[0];
+      int m = s->plan.M;
+      if (m < 1) m = 1;
+      if (m > NDP_EXECLOOP_MAX_KEYS) m = NDP_EXECLOOP_MAX_KEYS;
+      /* Every keypoint, not only the one followed: a plan heading out of the workspace
+       * comes from a planner that does not keep to it (misconfigured, or not ours). */
+      int rc = nd_exec_keys_check(&s->cfg, (const double(*)[4])s->plan.keys, m,
+                                  s->rep.refused_why, (int)sizeof(s->rep.refused_why));
+      const int same =
+          rc == ND_EXEC_OK && nd_exec_heading_to(&s->ex, now, key, ND_EXEC_SAME_KEY);
+      if (rc == ND_EXEC_OK && !same)
+        rc = nd_exec_plan(&s->ex, &s->cfg, now, key, s->plan.T, s->rep.refused_why,
+                          (int)sizeof(s->rep.refused_why));
       if (rc == ND_EXEC_OK) {
         s->have_plan = 1;
         s->t_plan = s->plan.t_arrive;
@@ -88,7 +96,9 @@ int ndp_execloop_cycle(ndp_execloop *s, double now, int64_t utime) {
         /* A refused plan does not refresh the plan clock: a planner sending only
          * unreachable plans must not keep the robot on its old segment. */
         s->rep.refused++;
+        s->rep.refused_box += rc == ND_EXEC_EBOX;
         s->rep.refused_id = s->plan.plan_id;
+        s->rep.refused_rc = rc;
         dirty = 1;
       }
     } else {

@@ -29,12 +29,16 @@ typedef struct {
   double ee_pos[3];
 } ndp_execloop_state_in;
 
-/* Newest plan: its first keypoint and segment duration. */
+#define NDP_EXECLOOP_MAX_KEYS 8  /* plan_t.MAX_KEYPOINTS */
+
+/* Newest plan: its keypoints (the first is followed, every one must lie in the workspace)
+ * and segment duration. */
 typedef struct {
   double t_arrive;     /* as ndp_execloop_state_in's */
   int64_t plan_id;
   int64_t utime;       /* plan_t.utime, passed on in EE_CMD.plan_utime */
-  double key[4];       /* (x, y, vx, vy) */
+  int M;               /* keypoints used, 1..NDP_EXECLOOP_MAX_KEYS (clamped if not) */
+  double keys[NDP_EXECLOOP_MAX_KEYS][4];  /* (x, y, vx, vy) */
   double T;
 } ndp_execloop_plan_in;
 
@@ -49,10 +53,12 @@ typedef struct {
   int stale;                /* NDP_STALE_* bits, 0 when live */
   int64_t n_stale, n_resume;/* transitions to stale and back */
   int64_t cycles, sent;     /* loop cycles; setpoints committed to the ring */
-  int64_t accepted, refused;/* plans taken / refused by nd_exec */
+  int64_t accepted, refused;/* plans taken / refused by nd_exec (limits or workspace) */
+  int64_t refused_box;      /* of the refused: a keypoint or trajectory outside the workspace */
   int64_t kept;             /* of the accepted: re-sent keypoints, their segment kept */
   int64_t late;             /* plans already stale when the loop took them: dropped */
   int64_t refused_id;       /* plan_id of the last refused plan */
+  int refused_rc;           /* its ND_EXEC_* code (ND_EXEC_EBOX: the workspace) */
   char refused_why[160];    /* nd_exec's reason for it */
   int64_t plan_id;          /* plan being followed, -1 before the first */
   int64_t plan_utime;       /* its utime, 0 before the first */
@@ -105,6 +111,8 @@ void ndp_execloop_init(ndp_execloop *s, const nd_exec_cfg *cfg, double timeout,
 
 /* One cycle at monotonic time now (s), which is wall-clock time utime (us): take inputs,
  * apply a new plan, step the executor, commit the setpoint for that instant to the ring.
+ * A plan with any keypoint outside cfg's workspace is refused like one nd_exec_plan
+ * refuses (counted, the running trajectory unchanged, the plan clock not renewed).
  * A new plan starts a new segment from the current setpoint, except one that re-sends
  * the keypoint the running segment is heading for (ND_EXEC_SAME_KEY): that segment
  * goes on, so the keypoint stays due when it was first due.

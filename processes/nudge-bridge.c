@@ -19,6 +19,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "nd_exec.h"
 #include "nd_jitter.h"
 #include "nd_parse.h"
 #include "nd_rtio.h"
@@ -30,6 +31,14 @@
 #include "ndp_validate.h"
 
 #define PROG "nudge-bridge"
+
+/* How far beyond its workspace box an EE_CMD position may lie. The executor keeps its
+ * trajectories within ND_EXEC_WS_MARGIN of the same box (segment overshoot, brake travel);
+ * one more centimetre, so that a setpoint it certified is never refused here, also when
+ * the two were given the box in different digits. */
+#define BRIDGE_WS_MARGIN 0.05
+_Static_assert(BRIDGE_WS_MARGIN >= ND_EXEC_WS_MARGIN,
+               "the bridge must accept every setpoint the executor may send");
 
 /* Beyond this many missed deadlines in one wake-up the world stops catching up and lets
  * real time slip: stepping 20 ms of backlog costs well under a period, a longer stall
@@ -54,6 +63,7 @@ typedef struct {
   double theta[NDS_NTHETA];
   double obj[3];           /* x, y, yaw */
   double ee[2];
+  double ws_lo[2], ws_hi[2]; /* workspace box, m: EE_CMD beyond it + BRIDGE_WS_MARGIN refused */
   int no_rt;
 } bridge_cfg;
 
@@ -293,6 +303,7 @@ typedef struct {
   bridge *b;
   ndp_status *status;
   ndp_ratelog refused;
+  ndp_ratelog refused_ws;  /* valid, but outside the workspace */
 } io_ctx;
 
 static void on_ee_cmd(const lcm_recv_buf_t *rbuf, const char *channel,
@@ -305,6 +316,21 @@ static void on_ee_cmd(const lcm_recv_buf_t *rbuf, const char *channel,
   if (ndp_check_ee_cmd(msg, why, sizeof(why))) {
     io->status->rejected++;
     ndp_refused(&io->refused, PROG, "EE_CMD", why);
+    return;
+  }
+  /* Tracking a command that the executor would never send moves the robot where nothing
+   * checked it may go: refused like an invalid one, so the newest valid command goes on
+   * being tracked until it is stale, and then the robot holds. */
+  const bridge_cfg *cfg = io->b->cfg;
+  for (int k = 0; k < 2; k++) {
+    if (msg->p[k] >= cfg->ws_lo[k] - BRIDGE_WS_MARGIN &&
+        msg->p[k] <= cfg->ws_hi[k] + BRIDGE_WS_MARGIN)
+      continue;
+    snprintf(why, sizeof(why), "p (%.3f, %.3f) is outside the workspace x [%.3f, %.3f], "
+             "y [%.3f, %.3f] m plus its %.2f m margin", msg->p[0], msg->p[1], cfg->ws_lo[0],
+             cfg->ws_hi[0], cfg->ws_lo[1], cfg->ws_hi[1], BRIDGE_WS_MARGIN);
+    io->status->rejected++;
+    ndp_refused(&io->refused_ws, PROG, "EE_CMD", why);
     return;
   }
   cmd_post c;
@@ -346,7 +372,15 @@ static void usage(FILE *f) {
           "  --theta S,T,R,M    sliding, torsional, rolling friction, sphere mass [kg]\n"
           "                     (default: ground truth 1,0.005,0.0001,1)\n"
           "  --object X,Y,YAW   initial object pose, m, m, rad (default 0,0,0)\n"
-          "  --ee X,Y           initial sphere position, m (default -0.10,0)\n"
+          "  --ee X,Y           initial sphere position, m (default -0.10,0), inside the\n"
+          "                     workspace\n"
+          "  --workspace XLO,YLO,XHI,YHI\n"
+          "                     box in metres: an EE_CMD whose position lies beyond it\n"
+          "                     by more than %g m is refused and counted; the robot goes\n"
+          "                     on with the last valid command, then holds. Default\n"
+          "                     %g,%g,%g,%g, nudge-planner's keypoint box; give\n"
+          "                     nudge-executor and nudge-planner the same --workspace\n"
+          "                     (nudge-up --workspace does)\n"
           "  --model FILE       MJCF with bodies \"object\" (free joint) and \"ee\" (slide\n"
           "                     joints \"ee_x\", \"ee_y\") instead of the built-in scene\n"
           "  --seconds S        run S seconds, then exit 0 (default: until SIGINT/SIGTERM)\n"
@@ -355,6 +389,7 @@ static void usage(FILE *f) {
           "  -h, --help         this text\n\n"
           "Exit status: 0 after SIGINT/SIGTERM or --seconds, 1 on a runtime failure (LCM),\n"
           "2 on bad arguments, a --model file among them (missing, malformed, unusable).\n",
+          BRIDGE_WS_MARGIN, ND_EXEC_WS_LO, ND_EXEC_WS_LO, ND_EXEC_WS_HI, ND_EXEC_WS_HI,
           NDP_DEFAULT_URL);
 }
 
@@ -370,7 +405,8 @@ static int parse_args(int argc, char **argv, bridge_cfg *c, char *err, int errle
     int known = !strcmp(a, "--mode") || !strcmp(a, "--rate") || !strcmp(a, "--mocap-hz") ||
                 !strcmp(a, "--cmd-timeout") || !strcmp(a, "--theta") ||
                 !strcmp(a, "--object") || !strcmp(a, "--ee") || !strcmp(a, "--model") ||
-                !strcmp(a, "--seconds") || !strcmp(a, "--lcm-url");
+                !strcmp(a, "--seconds") || !strcmp(a, "--lcm-url") ||
+                !strcmp(a, "--workspace");
     if (!known) {
       snprintf(err, errlen, "unknown option: %s", a);
       return -1;
@@ -403,6 +439,8 @@ static int parse_args(int argc, char **argv, bridge_cfg *c, char *err, int errle
       rc = nd_parse_list(v, "--object", 3, -NDP_MAX_POS, NDP_MAX_POS, c->obj, err, errlen);
     else if (!strcmp(a, "--ee"))
       rc = nd_parse_list(v, "--ee", 2, -NDP_MAX_POS, NDP_MAX_POS, c->ee, err, errlen);
+    else if (!strcmp(a, "--workspace"))
+      rc = ndp_parse_workspace(v, "--workspace", c->ws_lo, c->ws_hi, err, errlen);
     else if (!strcmp(a, "--model"))
       c->model_path = v;
     else if (!strcmp(a, "--seconds"))
@@ -464,6 +502,8 @@ int main(int argc, char **argv) {
   cfg.cmd_timeout = 0.1;
   memcpy(cfg.theta, nds_theta_true, sizeof(cfg.theta));
   cfg.ee[0] = -0.10;
+  cfg.ws_lo[0] = cfg.ws_lo[1] = ND_EXEC_WS_LO;
+  cfg.ws_hi[0] = cfg.ws_hi[1] = ND_EXEC_WS_HI;
 
   int pa = parse_args(argc, argv, &cfg, err, sizeof(err));
   if (pa == 1) {
@@ -542,6 +582,16 @@ int main(int argc, char **argv) {
     status = 2;
     goto done;
   }
+  if (cfg.ee[0] < cfg.ws_lo[0] || cfg.ee[0] > cfg.ws_hi[0] || cfg.ee[1] < cfg.ws_lo[1] ||
+      cfg.ee[1] > cfg.ws_hi[1]) {
+    /* The executor would refuse every plan from there, and this bridge its commands. */
+    fprintf(stderr, "%s: the sphere at --ee %g,%g starts outside the workspace x [%g, %g], "
+            "y [%g, %g] m (--workspace)\n", PROG, cfg.ee[0], cfg.ee[1], cfg.ws_lo[0],
+            cfg.ws_hi[0], cfg.ws_lo[1], cfg.ws_hi[1]);
+    usage(stderr);
+    status = 2;
+    goto done;
+  }
   if (check_start(&b->nm, &cfg, err, sizeof(err))) {
     fprintf(stderr, "%s: %s\n", PROG, err);
     usage(stderr);
@@ -598,10 +648,11 @@ int main(int argc, char **argv) {
   fprintf(stderr,
           "%s: emulation, world dt %.3g ms at %g Hz real time (%s, memory %s), MOCAP %g Hz, "
           "EE_CMD timeout %g s, theta (%g, %g, %g, %g), object (%g, %g, %g), ee (%g, %g), "
-          "model %s, LCM %s\n",
+          "workspace x [%g, %g] y [%g, %g] m (+%g m), model %s, LCM %s\n",
           PROG, 1e3 / cfg.rate, cfg.rate, how, lock, cfg.mocap_hz, cfg.cmd_timeout,
           cfg.theta[0], cfg.theta[1], cfg.theta[2], cfg.theta[3], cfg.obj[0], cfg.obj[1],
-          cfg.obj[2], cfg.ee[0], cfg.ee[1], cfg.model_path ? cfg.model_path : "built-in scene",
+          cfg.obj[2], cfg.ee[0], cfg.ee[1], cfg.ws_lo[0], cfg.ws_hi[0], cfg.ws_lo[1],
+          cfg.ws_hi[1], BRIDGE_WS_MARGIN, cfg.model_path ? cfg.model_path : "built-in scene",
           ndp_url(cfg.url));
 
   const double t0 = ndp_mono();
@@ -663,10 +714,12 @@ int main(int argc, char **argv) {
   double up = ndp_mono() - t0;
   fprintf(stderr,
           "%s: stopped after %.2f s: %lld steps (%.1f /s), %lld ROBOT_STATE, %lld MOCAP, "
-          "EE_CMD %lld received %lld refused, period error p50 %d p99 %d max %d us, "
+          "EE_CMD %lld received %lld refused (%lld outside the workspace), period error p50 "
+          "%d p99 %d max %d us, "
           "overruns %lld, dropped steps %lld, resets %lld, ring drops %llu\n",
           PROG, up, (long long)rs.steps, rs.steps / up, (long long)rs.robot_states,
-          (long long)rs.mocaps, (long long)st.received, (long long)st.rejected, (int)rs.loop.p50_us,
+          (long long)rs.mocaps, (long long)st.received, (long long)st.rejected,
+          (long long)io.refused_ws.count, (int)rs.loop.p50_us,
           (int)rs.loop.p99_us, (int)rs.loop.max_us, (long long)rs.loop.overruns, (long long)rs.slipped,
           (long long)rs.resets, (unsigned long long)atomic_load(&b->out.dropped));
 

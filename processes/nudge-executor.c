@@ -43,6 +43,9 @@
 #define IO_PRIORITY 70      /* the main thread: publishing must not starve behind batch work */
 #define RT_STACK (256 * 1024)
 
+_Static_assert(NDP_EXECLOOP_MAX_KEYS == NUDGE_PLAN_T_MAX_KEYPOINTS,
+               "the loop's plan carries every keypoint a PLAN can have");
+
 /* ---- the loop ---------------------------------------------------------------------- */
 
 /* The hand-over objects, shared by both threads. */
@@ -129,6 +132,7 @@ typedef struct {
   ndp_status st;
   int backlog_max;     /* most setpoints found waiting in the ring at once */
   ndp_ratelog log_state, log_plan, log_exec;  /* refused inputs; plans nd_exec refused */
+  ndp_ratelog log_box;                        /* of those: for the workspace */
   ndp_ratelog log_old;                        /* plans made from a state too old */
 } io_ctx;
 
@@ -166,7 +170,8 @@ static void on_plan(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_plan
   in.t_arrive = ndp_sent_mono(msg->utime);
   in.plan_id = msg->plan_id;
   in.utime = msg->utime;
-  memcpy(in.key, msg->keypoints[0], sizeof in.key);
+  in.M = msg->M;  /* 1..MAX_KEYPOINTS: ndp_check_plan */
+  memcpy(in.keys, msg->keypoints, sizeof in.keys);
   /* The planner's rollouts reach keypoint 0 at state_utime + T. The plan arrives a planning
    * time later, so the segment is shortened by that age to keep the keypoint where the
    * planner put it in time; otherwise every plan would push the target further out and a
@@ -234,11 +239,19 @@ static void usage(FILE *f) {
           "  --v-max M/S     speed limit (default %g)\n"
           "  --a-max M/S2    acceleration limit (default %g)\n"
           "  --j-max M/S3    jerk limit (default %g)\n"
+          "  --workspace XLO,YLO,XHI,YHI\n"
+          "                  box in metres every keypoint of a PLAN must lie in; a plan\n"
+          "                  with one outside, or whose segment or brake to rest would\n"
+          "                  leave the box by more than %g m, is refused and counted\n"
+          "                  (default %g,%g,%g,%g: nudge-planner's keypoint box,\n"
+          "                  its --workspace; keep the two, and nudge-bridge's, the same:\n"
+          "                  nudge-up --workspace gives all three one box)\n"
           "  --lcm-url URL   LCM URL (default: $LCM_DEFAULT_URL, else " NDP_DEFAULT_URL ")\n"
           "  --no-rt         do not ask for SCHED_FIFO and mlockall\n"
           "  -h, --help      this text\n\n"
           "Subscribes PLAN, ROBOT_STATE; publishes EE_CMD, STATUS (1 Hz).\n",
-          d.v_max, d.a_max, d.j_max);
+          d.v_max, d.a_max, d.j_max, d.ws_margin, d.ws_lo[0], d.ws_lo[1], d.ws_hi[0],
+          d.ws_hi[1]);
 }
 
 static int bad_arg(const char *msg) {
@@ -271,7 +284,7 @@ static int parse_args(int argc, char **argv, exec_opts *o) {
     else if (!strcmp(a, "--v-max")) dst = &o->cfg.v_max, lo = 1e-3, hi = 10.0;
     else if (!strcmp(a, "--a-max")) dst = &o->cfg.a_max, lo = 1e-3, hi = 1000.0;
     else if (!strcmp(a, "--j-max")) dst = &o->cfg.j_max, lo = 1e-3, hi = 1e6;
-    else if (strcmp(a, "--lcm-url")) {
+    else if (strcmp(a, "--lcm-url") && strcmp(a, "--workspace")) {
       snprintf(err, sizeof err, "unknown argument '%s'", a);
       return bad_arg(err);
     }
@@ -280,7 +293,10 @@ static int parse_args(int argc, char **argv, exec_opts *o) {
       return bad_arg(err);
     }
     const char *v = argv[++i];
-    if (!dst) {
+    if (!strcmp(a, "--workspace")) {
+      if (ndp_parse_workspace(v, a, o->cfg.ws_lo, o->cfg.ws_hi, err, sizeof err))
+        return bad_arg(err);
+    } else if (!dst) {
       o->url = v;
     } else if (nd_parse_double(v, a, lo, hi, dst, err, sizeof err)) {
       return bad_arg(err);
@@ -331,7 +347,9 @@ static void note_report(io_ctx *c, const ndp_execloop_report *r, ndp_execloop_re
   if (r->refused != last->refused) {
     char why[200];
     snprintf(why, sizeof why, "plan %lld: %s", (long long)r->refused_id, r->refused_why);
-    ndp_refused(&c->log_exec, PROG, "plan", why);
+    /* Apart from the limits' refusals, so a planner often refused for those cannot
+     * silence the first reports of plans outside the workspace. */
+    ndp_refused(r->refused_rc == ND_EXEC_EBOX ? &c->log_box : &c->log_exec, PROG, "plan", why);
   }
   *last = *r;
 }
@@ -380,8 +398,10 @@ int main(int argc, char **argv) {
 
   fprintf(stderr,
           PROG ": rate %g Hz, timeout %g s, v_max %g m/s, a_max %g m/s^2, j_max %g m/s^3, "
-               "lcm %s, real-time %s\n",
+               "workspace x [%g, %g] y [%g, %g] m (+%g m for segments), lcm %s, real-time %s\n",
           opt.rate, opt.timeout, opt.cfg.v_max, opt.cfg.a_max, opt.cfg.j_max,
+          opt.cfg.ws_lo[0], opt.cfg.ws_hi[0], opt.cfg.ws_lo[1], opt.cfg.ws_hi[1],
+          opt.cfg.ws_margin,
           ndp_url(opt.url), opt.rt ? "requested" : "off (--no-rt)");
 
   if (opt.rt) lock_memory();
@@ -467,11 +487,13 @@ int main(int argc, char **argv) {
           PROG ": stopped after %lld cycles, %lld setpoints; period error p50 %d us, p99 %d "
                "us, max %d us; %lld overruns (%lld deadlines skipped); %llu ring drops; "
                "max publish backlog %d; plans %lld taken (%lld re-sent the keypoint being "
-               "tracked), %lld refused, %lld stale on arrival, %lld from an outdated state\n",
+               "tracked), %lld refused (%lld for the workspace), %lld stale on arrival, %lld "
+               "from an outdated state\n",
           (long long)last.cycles, (long long)last.sent, loop.p50_us, loop.p99_us,
           loop.max_us, (long long)loop.overruns, (long long)last.missed,
           (unsigned long long)drops_seen, c.backlog_max, (long long)last.accepted,
-          (long long)last.kept, (long long)last.refused, (long long)last.late,
+          (long long)last.kept, (long long)last.refused, (long long)last.refused_box,
+          (long long)last.late,
           (long long)c.log_old.count);
   close(io.bell);
   nudge_robot_state_t_unsubscribe(lcm, sub_state);

@@ -40,9 +40,12 @@ typedef struct {
   double max_rate;       /* Hz */
   double state_timeout;  /* s */
   double theta[NDS_NTHETA];
+  double ws_lo[2], ws_hi[2]; /* keypoint box, m */
 } opts;
 
 static void usage(FILE *f) {
+  nds_planner_cfg d;
+  nds_planner_cfg_default(&d);
   fprintf(f,
           "usage: " PROG " [options]\n"
           "MPC planner: plans minimum-snap keypoints with iCEM on MuJoCo rollouts from the\n"
@@ -65,8 +68,14 @@ static void usage(FILE *f) {
           "  --theta S,T,R,M      initial theta: sliding, torsional, rolling friction, sphere\n"
           "                       mass in kg (default: the simulation's ground truth); used\n"
           "                       until PARAMS arrives, plans then carry theta_version -1\n"
+          "  --workspace XLO,YLO,XHI,YHI\n"
+          "                       box in metres the keypoints are drawn in (default\n"
+          "                       %g,%g,%g,%g); nudge-executor refuses plans with a keypoint\n"
+          "                       outside its own --workspace, nudge-bridge commands beyond\n"
+          "                       its own: give all three the same box (nudge-up\n"
+          "                       --workspace does)\n"
           "  -h, --help           this text\n",
-          NDP_DEFAULT_URL);
+          NDP_DEFAULT_URL, d.ws_lo[0], d.ws_lo[1], d.ws_hi[0], d.ws_hi[1]);
 }
 
 /* Return 0, 1 for --help, or 2 after printing what is wrong. */
@@ -84,6 +93,10 @@ static int parse_opts(int argc, char **argv, opts *o) {
   o->max_rate = 20.0;
   o->state_timeout = 0.1;
   memcpy(o->theta, nds_theta_true, sizeof(o->theta));
+  nds_planner_cfg d;
+  nds_planner_cfg_default(&d);
+  memcpy(o->ws_lo, d.ws_lo, sizeof(o->ws_lo));
+  memcpy(o->ws_hi, d.ws_hi, sizeof(o->ws_hi));
 
   for (int i = 1; i < argc; i++) {
     const char *a = argv[i];
@@ -94,7 +107,7 @@ static int parse_opts(int argc, char **argv, opts *o) {
     int known = !strcmp(a, "--lcm-url") || !strcmp(a, "--threads") || !strcmp(a, "--pop") ||
                 !strcmp(a, "--iters") || !strcmp(a, "--plan-dt") || !strcmp(a, "--seed") ||
                 !strcmp(a, "--max-rate") || !strcmp(a, "--state-timeout") ||
-                !strcmp(a, "--theta");
+                !strcmp(a, "--theta") || !strcmp(a, "--workspace");
     if (!known) {
       fprintf(stderr, PROG ": unknown option: %s\n", a);
       usage(stderr);
@@ -116,6 +129,7 @@ static int parse_opts(int argc, char **argv, opts *o) {
     else if (!strcmp(a, "--seed")) rc = nd_parse_u64(v, a, &o->seed, err, sizeof(err));
     else if (!strcmp(a, "--max-rate")) rc = nd_parse_double(v, a, 0.1, 1000, &o->max_rate, err, sizeof(err));
     else if (!strcmp(a, "--state-timeout")) rc = nd_parse_double(v, a, 1e-3, 10, &o->state_timeout, err, sizeof(err));
+    else if (!strcmp(a, "--workspace")) rc = ndp_parse_workspace(v, a, o->ws_lo, o->ws_hi, err, sizeof(err));
     else rc = nds_theta_parse(v, a, o->theta, err, sizeof(err));
     if (rc) {
       fprintf(stderr, PROG ": %s\n", err);
@@ -531,6 +545,8 @@ int main(int argc, char **argv) {
   pc.pop = o.pop;
   pc.iters = o.iters;
   pc.seed = o.seed;
+  memcpy(pc.ws_lo, o.ws_lo, sizeof(pc.ws_lo));
+  memcpy(pc.ws_hi, o.ws_hi, sizeof(pc.ws_hi));
   if (nds_model_init(&pm, &sc, err, sizeof(err))) goto done;
   if (!(pool = nd_pool_create(o.threads, err, sizeof(err)))) goto done;
   if (!(p.planner = nds_planner_create(&pm, &pc, pool, err, sizeof(err)))) goto done;
@@ -558,10 +574,11 @@ int main(int argc, char **argv) {
 
   fprintf(stderr,
           PROG ": %s, iCEM N %d C %d, M %d, T %.2f s, plan dt %.4f s, %d worker(s), max %.1f "
-          "plans/s, state timeout %.3f s, theta (%g, %g, %g, %g), seed %llu\n",
+          "plans/s, state timeout %.3f s, theta (%g, %g, %g, %g), seed %llu, keypoints in "
+          "x [%g, %g] y [%g, %g] m\n",
           ndp_url(o.url), o.pop, o.iters, pc.M, pc.T, o.plan_dt, o.threads, o.max_rate,
           o.state_timeout, o.theta[0], o.theta[1], o.theta[2], o.theta[3],
-          (unsigned long long)o.seed);
+          (unsigned long long)o.seed, pc.ws_lo[0], pc.ws_hi[0], pc.ws_lo[1], pc.ws_hi[1]);
 
   const double period = 1.0 / o.max_rate;
   double next_plan = 0.0, last = ndp_mono();

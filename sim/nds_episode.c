@@ -83,7 +83,8 @@ int nds_episode_run(const nds_model *world, mjData *d, nds_planner *planner,
       plan_wall += wall_s() - w0;
       out->plans++;
       char xerr[128];
-      /* A plan the executor cannot meet within its limits is dropped and the current
+      /* A plan the executor cannot meet within its limits or its workspace (the
+       * planner's box: nd_exec_cfg_default) is dropped and the current
        * trajectory goes on, as the real executor does; so is a re-sent keypoint, whose
        * segment goes on rather than restarting (restarts can hold the robot still:
        * ndp_execloop.c). */

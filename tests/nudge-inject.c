@@ -9,7 +9,11 @@
  *   garbage  messages that do not decode: random bytes, valid encodings cut short, the
  *            wrong type on the channel, and on string-carrying types string lengths that
  *            lie (negative, zero, beyond the message, no terminating NUL).
- * No message of either kind is valid, so nothing injected can move the robot. */
+ * No message of either kind is valid, so nothing injected can move the robot.
+ * A third kind, sent only when asked for (--kind workspace), is valid in every field but
+ * lies outside the default workspace box: a PLAN with its keypoints at (0.8, 0) and an
+ * EE_CMD at (0.8, 0). The executor and the bridge must refuse these; a stack that did not
+ * would move the robot toward them, which is what the test looks for. */
 #include <lcm/lcm.h>
 #include <math.h>
 #include <stdint.h>
@@ -41,6 +45,7 @@ static const char *const ch_name[CH_COUNT] = {"MOCAP", "ROBOT_STATE", "EE_CMD", 
 typedef struct {
   int on[CH_COUNT];
   int bad, garbage;    /* kinds to send */
+  int workspace;       /* the valid-but-outside kind (PLAN, EE_CMD only) */
   int repeat;
   double gap_s;        /* pause after each message */
   uint64_t seed;
@@ -52,7 +57,7 @@ typedef struct {
   lcm_t *lcm;
   const inj_opts *o;
   int ch;
-  int64_t n_bad[CH_COUNT], n_garbage[CH_COUNT];
+  int64_t n_bad[CH_COUNT], n_garbage[CH_COUNT], n_ws[CH_COUNT];
   int failed;
   uint64_t rng;
   unsigned char buf[MAX_MSG];
@@ -79,11 +84,23 @@ static void pause_gap(const inj *j) {
   }
 }
 
-static void send_raw(inj *j, const void *data, int len, int bad) {
+enum { K_GARBAGE, K_BAD, K_WS };
+
+static void send_raw(inj *j, const void *data, int len, int kind) {
   if (lcm_publish(j->lcm, ch_name[j->ch], data, (unsigned)len) != 0) j->failed = 1;
-  if (bad) j->n_bad[j->ch]++;
+  if (kind == K_BAD) j->n_bad[j->ch]++;
+  else if (kind == K_WS) j->n_ws[j->ch]++;
   else j->n_garbage[j->ch]++;
   pause_gap(j);
+}
+
+/* Publish the len bytes in j->buf as a message of the workspace kind. */
+static void send_ws(inj *j, int len) {
+  if (len <= 0) {
+    j->failed = 1;
+    return;
+  }
+  send_raw(j, j->buf, len, K_WS);
 }
 
 /* Publish the len bytes encoded in j->buf as a bad message (if that kind is on). */
@@ -92,7 +109,7 @@ static void send_enc(inj *j, int len) {
     j->failed = 1;
     return;
   }
-  if (j->o->bad) send_raw(j, j->buf, len, 1);
+  if (j->o->bad) send_raw(j, j->buf, len, K_BAD);
 }
 
 /* Garbage common to every channel: random bytes of several lengths (wrong fingerprint
@@ -219,6 +236,11 @@ static void inject_ee_cmd(inj *j) {
   CMD_BAD(m.mode = -1);
   CMD_BAD(m.plan_utime = -1);
 #undef CMD_BAD
+  if (j->o->workspace) {
+    m = ok;
+    m.p[0] = 0.8;
+    send_ws(j, nudge_ee_cmd_t_encode(j->buf, 0, MAX_MSG, &m));
+  }
   if (j->o->garbage) {
     m = ok;
     send_garbage(j, j->buf, nudge_ee_cmd_t_encode(j->buf, 0, MAX_MSG, &m));
@@ -257,6 +279,13 @@ static void inject_plan(inj *j) {
   PLAN_BAD(m.utime = 0);
   PLAN_BAD(m.state_utime = -1);
 #undef PLAN_BAD
+  if (j->o->workspace) {
+    m = ok;
+    m.plan_id = 2000000 + j->n_ws[CH_PLAN];
+    m.utime = m.state_utime = wall_us();
+    m.keypoints[0][0] = m.keypoints[1][0] = 0.8;
+    send_ws(j, nudge_plan_t_encode(j->buf, 0, MAX_MSG, &m));
+  }
   if (j->o->garbage) {
     m = ok;
     send_garbage(j, j->buf, nudge_plan_t_encode(j->buf, 0, MAX_MSG, &m));
@@ -387,13 +416,15 @@ static void usage(FILE *f) {
           "lying string lengths). Nothing sent is valid.\n\n"
           "  --channel CH    one of MOCAP ROBOT_STATE EE_CMD PLAN TASK PARAMS EPISODE STATUS;\n"
           "                  repeat for more (default: all but STATUS)\n"
-          "  --kind K        bad, garbage or all (default all)\n"
+          "  --kind K        bad, garbage or all (default all); or workspace: valid PLAN\n"
+          "                  and EE_CMD outside the default workspace (at (0.8, 0))\n"
           "  --repeat N      send everything N times, 1..10000 (default 1)\n"
           "  --gap-ms MS     pause after each message, 0..1000 ms (default 1)\n"
           "  --seed N        seed of the random garbage (default 1)\n"
           "  --lcm-url URL   default $LCM_DEFAULT_URL, else LCM's default\n"
           "  -h, --help      this text\n\n"
-          "Prints per channel 'inject_<CH>_bad N count' and 'inject_<CH>_garbage N count'.\n"
+          "Prints per channel 'inject_<CH>_bad N count' and 'inject_<CH>_garbage N count'\n"
+          "(and 'inject_<CH>_workspace N count').\n"
           "Exit status 0, 1 if LCM failed, 2 on bad arguments.\n");
 }
 
@@ -439,7 +470,8 @@ static int parse_args(int argc, char **argv, inj_opts *o) {
     } else if (!strcmp(a, "--kind")) {
       if (!strcmp(v, "bad")) o->garbage = 0;
       else if (!strcmp(v, "garbage")) o->bad = 0;
-      else if (strcmp(v, "all")) return bad_arg("--kind: expected bad, garbage or all");
+      else if (!strcmp(v, "workspace")) o->bad = o->garbage = 0, o->workspace = 1;
+      else if (strcmp(v, "all")) return bad_arg("--kind: expected bad, garbage, all or workspace");
     } else if (!strcmp(a, "--repeat")) {
       if (nd_parse_int(v, a, 1, 10000, &o->repeat, err, sizeof err)) return bad_arg(err);
     } else if (!strcmp(a, "--gap-ms")) {
@@ -485,6 +517,8 @@ int main(int argc, char **argv) {
     if (!o.on[c]) continue;
     printf("inject_%s_bad %lld count\n", ch_name[c], (long long)j.n_bad[c]);
     printf("inject_%s_garbage %lld count\n", ch_name[c], (long long)j.n_garbage[c]);
+    if (o.workspace)
+      printf("inject_%s_workspace %lld count\n", ch_name[c], (long long)j.n_ws[c]);
     tb += j.n_bad[c];
     tg += j.n_garbage[c];
   }

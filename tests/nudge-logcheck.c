@@ -40,6 +40,7 @@ typedef struct {
   double max_gap_ms;
   double max_ms;           /* stop-after */
   double min_speed;        /* live */
+  double max_travel;       /* ee-pos */
   int min_plans;           /* live */
   /* windows and references, 0 = unset */
   int64_t t0, before, after, from, to;
@@ -425,6 +426,53 @@ static int cmd_last(const lc_opts *o) {
   printf("last_utime %lld us\n", (long long)l.last);
   printf("last_count %lld count\n", (long long)l.count);
   if (!l.count) fail("no %s message in the log", o->arg);
+  return 0;
+}
+
+/* ---- ee-pos: where the robot was (ROBOT_STATE) within a window ---------------------- */
+
+typedef struct {
+  const lc_opts *o;
+  int64_t count;
+  double first[3], last[3], lo[2], hi[2], travel;
+} pos_acc;
+
+static void pos_visit(const lcm_eventlog_event_t *ev, void *user) {
+  pos_acc *a = user;
+  nudge_robot_state_t m;
+  char why[160];
+  if (nudge_robot_state_t_decode(ev->data, 0, ev->datalen, &m) < 0 ||
+      ndp_check_robot_state(&m, why, sizeof why))
+    return;
+  if ((a->o->from && m.utime < a->o->from) || (a->o->to && m.utime > a->o->to)) return;
+  if (!a->count++) {
+    memcpy(a->first, m.ee_pos, sizeof a->first);
+    for (int k = 0; k < 2; k++) a->lo[k] = a->hi[k] = m.ee_pos[k];
+  }
+  memcpy(a->last, m.ee_pos, sizeof a->last);
+  for (int k = 0; k < 2; k++) {
+    if (m.ee_pos[k] < a->lo[k]) a->lo[k] = m.ee_pos[k];
+    if (m.ee_pos[k] > a->hi[k]) a->hi[k] = m.ee_pos[k];
+  }
+  const double d = dist3(m.ee_pos, a->first);
+  if (d > a->travel) a->travel = d;
+}
+
+static int cmd_ee_pos(const lc_opts *o) {
+  pos_acc a;
+  memset(&a, 0, sizeof a);
+  a.o = o;
+  if (for_each(o->log, NDP_CH_ROBOT_STATE, pos_visit, &a)) return 1;
+  printf("ee_pos_count %lld count\n", (long long)a.count);
+  printf("ee_pos_first_x %.4f m\nee_pos_first_y %.4f m\n", a.first[0], a.first[1]);
+  printf("ee_pos_last_x %.4f m\nee_pos_last_y %.4f m\n", a.last[0], a.last[1]);
+  printf("ee_pos_x_min %.4f m\nee_pos_x_max %.4f m\n", a.lo[0], a.hi[0]);
+  printf("ee_pos_y_min %.4f m\nee_pos_y_max %.4f m\n", a.lo[1], a.hi[1]);
+  printf("ee_pos_travel_max %.5f m\n", a.travel);
+  if (!a.count) fail("no ROBOT_STATE in the window");
+  if (o->max_travel >= 0 && a.travel > o->max_travel)
+    fail("the robot moved %.4f m from (%.4f, %.4f) within the window, more than %g m",
+         a.travel, a.first[0], a.first[1], o->max_travel);
   return 0;
 }
 
@@ -945,6 +993,10 @@ static void usage(FILE *f) {
           "      --before-utime U (at or before U), --after-utime U (after U)\n"
           "  status LOG NAME  heartbeat counters of process NAME: the last one, or\n"
           "      --before-utime U (last before U), --after-utime U (first after U), --pid P\n"
+          "  ee-pos LOG       the robot's positions (ROBOT_STATE): count, first, last, x and\n"
+          "                   y range, farthest from the first\n"
+          "      --from-utime U, --to-utime U     window\n"
+          "      --max-travel M     fail if a position lies farther than M m from the first\n"
           "  live LOG         plans so far, newest setpoint's speed and mode\n"
           "      --min-plans N, --min-speed S (and tracking)\n"
           "  stale-cmds LOG --timeout S   every TRACKING setpoint must follow a plan at most\n"
@@ -987,7 +1039,7 @@ static int parse_args(int argc, char **argv, lc_opts *o) {
   char err[256];
   memset(o, 0, sizeof *o);
   o->min_start = o->min_success = o->min_end = o->min_plans = -1;
-  o->max_gap_ms = o->max_ms = o->min_speed = -1.0;
+  o->max_gap_ms = o->max_ms = o->min_speed = o->max_travel = -1.0;
   o->slack_us = 50.0;
   o->slack_ms = 2.0;
   o->lim = nd_exec_cfg_default();
@@ -1002,7 +1054,8 @@ static int parse_args(int argc, char **argv, lc_opts *o) {
   const int needs_arg = !strcmp(o->cmd, "status") || !strcmp(o->cmd, "last");
   if (strcmp(o->cmd, "episodes") && strcmp(o->cmd, "ee-cmd") && strcmp(o->cmd, "stop-after") &&
       strcmp(o->cmd, "live") && strcmp(o->cmd, "stale-cmds") && strcmp(o->cmd, "first-beats") &&
-      strcmp(o->cmd, "buffer") && strcmp(o->cmd, "history") && !needs_arg) {
+      strcmp(o->cmd, "buffer") && strcmp(o->cmd, "history") && strcmp(o->cmd, "ee-pos") &&
+      !needs_arg) {
     snprintf(err, sizeof err, "unknown command '%s'", o->cmd);
     return bad_arg(err);
   }
@@ -1032,6 +1085,7 @@ static int parse_args(int argc, char **argv, lc_opts *o) {
     else if (!strcmp(a, "--min-plans")) rc = nd_parse_int(v, a, 0, 100000000, &o->min_plans, err, sizeof err);
     else if (!strcmp(a, "--max-gap-ms")) rc = nd_parse_double(v, a, 0.0, 1e6, &o->max_gap_ms, err, sizeof err);
     else if (!strcmp(a, "--max-ms")) rc = nd_parse_double(v, a, 0.0, 1e7, &o->max_ms, err, sizeof err);
+    else if (!strcmp(a, "--max-travel")) rc = nd_parse_double(v, a, 0.0, 100.0, &o->max_travel, err, sizeof err);
     else if (!strcmp(a, "--min-speed")) rc = nd_parse_double(v, a, 0.0, 100.0, &o->min_speed, err, sizeof err);
     else if (!strcmp(a, "--timeout")) rc = nd_parse_double(v, a, 1e-4, 60.0, &o->timeout, err, sizeof err);
     else if (!strcmp(a, "--slack-ms")) rc = nd_parse_double(v, a, 0.0, 1e4, &o->slack_ms, err, sizeof err);
@@ -1073,6 +1127,7 @@ int main(int argc, char **argv) {
   else if (!strcmp(o.cmd, "ee-cmd")) rc = cmd_ee_cmd(&o);
   else if (!strcmp(o.cmd, "stop-after")) rc = cmd_stop_after(&o);
   else if (!strcmp(o.cmd, "last")) rc = cmd_last(&o);
+  else if (!strcmp(o.cmd, "ee-pos")) rc = cmd_ee_pos(&o);
   else if (!strcmp(o.cmd, "status")) rc = cmd_status(&o);
   else if (!strcmp(o.cmd, "stale-cmds")) rc = cmd_stale_cmds(&o);
   else if (!strcmp(o.cmd, "first-beats")) rc = cmd_first_beats(&o);

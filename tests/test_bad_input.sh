@@ -15,8 +15,10 @@
 # `rejected` (heartbeat before vs first heartbeat after the burst). Afterwards: no process
 # died or was restarted (supervisor.log, pids), the task runner, running through the
 # injections, finished with at least one goal reached (see test_system for why one) and
-# recorded all three tasks, and a further task gets plans and reaches its goal (or at least
-# keeps getting plans) with smooth setpoints.
+# recorded all three tasks. Then, with no task active, a PLAN and an EE_CMD valid in
+# every field but outside the workspace box are refused and counted by the executor and
+# the bridge, and the robot does not move. A further task then gets plans and reaches its
+# goal (or at least keeps getting plans) with smooth setpoints.
 set -u
 PT_NAME=test_bad_input
 . "$(dirname "${BASH_SOURCE[0]}")/process-lib.sh"
@@ -110,6 +112,48 @@ nrec=$(grep -c 'nudge-tasks: task [0-9]* recorded:' "$PT_WORK/tasks.err")
 pt_figure tasks_recorded_during_injection "$nrec" count
 pt_check "the recorder recorded the 3 tasks run through the injections ($nrec)" test "$nrec" -eq 3
 
+# The workspace (defence in depth): with no task active the planner is idle and the robot
+# rests. A PLAN valid in every field but with its keypoints at (0.8, 0), outside the
+# default box, then an EE_CMD at (0.8, 0) (nudge-inject --kind workspace) must each be
+# refused and counted by the executor and the bridge, and the robot must stay where it is.
+# Its measured position comes from a log of ROBOT_STATE kept for these few seconds only.
+# The further task below shows that plans inside the box are still followed.
+sleep "$(pt_slow 0.5)"   # the last task's plans have gone stale: the executor holds
+RS_LOG=$PT_WORK/ws-state.lcmlog
+pt_spawn rs_logger lcm-logger -q -f -c '^ROBOT_STATE$' "$RS_LOG"
+pt_wait_for 5 test -e "$RS_LOG" || pt_fail "lcm-logger (ROBOT_STATE) did not start"
+sleep 0.2
+ws_case() { # CHANNEL PROCESS REPEAT GAP_MS; sets ws_cmd_from/to around an EE_CMD burst
+  local ch=$1 name=$2 a b out n r0 r1 d
+  a=$(pt_now_us)
+  [[ $ch == EE_CMD ]] && ws_cmd_from=$a
+  out=$("$PT_INJ" --channel "$ch" --kind workspace --repeat "$3" --gap-ms "$4" 2>&1) ||
+    pt_fail "nudge-inject --channel $ch --kind workspace failed: $out"
+  sleep 0.3   # time to move, for a stack that would follow them
+  b=$(pt_now_us)
+  [[ $ch == EE_CMD ]] && ws_cmd_to=$b
+  n=$(awk -v k="inject_${ch}_workspace" '$1 == k { print $2 }' <<<"$out")
+  pt_figure "inject_${ch}_workspace" "${n:-0}" count
+  pt_wait_for 4 has_beat_after "$name" $((b + 200000)) ||
+    pt_fail "$ch outside the workspace: no heartbeat of $name after the burst"
+  pt_val r0 status "$LOG" "$name" --before-utime "$a" rejected
+  pt_val r1 status "$LOG" "$name" --after-utime $((b + 200000)) rejected
+  d=$(( ${r1:-0} - ${r0:-0} ))
+  pt_figure "rejected_${ch}_workspace_${name#nudge-}" "$d" count
+  pt_check "$ch outside the workspace: $name refused and counted each of the ${n:-?} (rejected +$d)" \
+    test -n "$r0" -a -n "$r1" -a "${n:-0}" -ge 1 -a "$d" -ge "${n:-1}"
+  pt_check "$ch outside the workspace: the robot did not move (travel <= 1 mm)" \
+    pt_lc ee-pos "$RS_LOG" --from-utime "$a" --to-utime "$b" --max-travel 0.001
+}
+ws_case PLAN nudge-executor 20 25
+ws_case EE_CMD nudge-bridge 300 1
+kill -INT "$rs_logger" 2>/dev/null
+pt_wait_pid "$rs_logger" 5 || kill -KILL "$rs_logger"
+pt_check "the executor said why it refused (a keypoint outside the workspace)" \
+  grep -q "keypoint 0 (0.800, 0.000) is outside the workspace" "$RUN/executor.log"
+pt_check "the bridge said why it refused (outside the workspace)" \
+  grep -q "refused EE_CMD: p (0.800, 0.000) is outside the workspace" "$RUN/bridge.log"
+
 # Still working: a further task gets plans and smooth setpoints.
 t_after=$(pt_now_us)
 pt_spawn tasks2 "$PT_BIN/nudge-tasks" --goal 0.25,0.25,0.8 --tau "$(pt_slow 4)" >"$PT_WORK/tasks2.out" \
@@ -122,8 +166,12 @@ pt_figure plans_after_injection "${nplans:-0}" count
 reached2=$(grep -c '^reached 1/1 goals' "$PT_WORK/tasks2.out")
 pt_check "after the injections a further task reached its goal or plans kept flowing (${nplans:-0} plans)" \
   test "${nplans:-0}" -ge 1 -a \( "$reached2" -eq 1 -o "${nplans:-0}" -ge 10 \)
+# The executor's setpoints, apart from the EE_CMDs injected outside the workspace (valid
+# messages from another sender: the log has them too).
+pt_check "EE_CMD through the injections: loop alive (no gap over 0.5 s), continuous" \
+  pt_lc ee-cmd "$LOG" --max-gap-ms 500 --from-utime "$t_first" --to-utime "$ws_cmd_from"
 pt_check "EE_CMD after the injections: loop alive (no gap over 0.5 s), continuous" \
-  pt_lc ee-cmd "$LOG" --max-gap-ms 500 --from-utime "$t_first"
+  pt_lc ee-cmd "$LOG" --max-gap-ms 500 --from-utime "$ws_cmd_to"
 
 pt_check_not "no process died or was restarted (supervisor.log)" \
   grep -qE 'exited|restarted' "$RUN/supervisor.log"

@@ -16,7 +16,8 @@
 # 3. nudge-up's own options; then nudge-up run against stand-in programs (tiny scripts in
 #    a scratch bin dir that record their argv): arguments with spaces, quotes, ';', $(..),
 #    backquotes, globs and empty strings reach the processes and the task runner literally
-#    and nothing is executed; a process that refuses its arguments makes nudge-up exit 2.
+#    and nothing is executed; --workspace reaches planner, executor and bridge; a process
+#    that refuses its arguments makes nudge-up exit 2.
 #    These runs are under umask 000: nothing in the log directory may be world-writable,
 #    and the processes must inherit a umask without o+w.
 # 4. nudge-spy passes its arguments to java (a stand-in) literally.
@@ -152,6 +153,11 @@ bad nudge-bridge "--model needs a value" --model
 bad nudge-bridge "unknown|--threads" --threads 2
 bad nudge-bridge "--mocap-hz 2000 exceeds|1000" --mocap-hz 2000
 bad nudge-bridge "the sphere at --ee 0,0|overlaps the object" --ee 0,0
+list_cases nudge-bridge --workspace -0.5,-0.5,0.5,0.5 -20
+bad nudge-bridge "--workspace|'0.5,-0.5,-0.5,0.5' is not a box|XLO < XHI" --workspace 0.5,-0.5,-0.5,0.5
+bad nudge-bridge "--workspace|'-0.5,0.5,0.5,0.5' is not a box" --workspace -0.5,0.5,0.5,0.5
+bad nudge-bridge "--ee 0.7,0 starts outside the workspace" --ee 0.7,0
+bad nudge-bridge "--ee -0.1,0 starts outside the workspace|(--workspace)" --workspace 0,0,0.5,0.5
 
 common_cases nudge-executor
 num_cases nudge-executor --rate 0.5
@@ -159,6 +165,10 @@ num_cases nudge-executor --timeout 0
 num_cases nudge-executor --v-max 100
 num_cases nudge-executor --a-max 1e4
 num_cases nudge-executor --j-max 1e7
+list_cases nudge-executor --workspace -0.5,-0.5,0.5,0.5 -20
+bad nudge-executor "--workspace|'0.5,-0.5,-0.5,0.5' is not a box|XLO < XHI" --workspace 0.5,-0.5,-0.5,0.5
+bad nudge-executor "--workspace|'-0.5,0.5,0.5,0.5' is not a box" --workspace -0.5,0.5,0.5,0.5
+bad nudge-executor "--workspace|'0,0,0,0' is not a box" --workspace 0,0,0,0
 bad nudge-executor "--lcm-url needs a value" --lcm-url
 
 common_cases nudge-planner
@@ -170,6 +180,8 @@ seed_cases nudge-planner --seed
 num_cases nudge-planner --max-rate 0
 num_cases nudge-planner --state-timeout 0
 theta_cases nudge-planner --theta
+list_cases nudge-planner --workspace -0.5,-0.5,0.5,0.5 -20
+bad nudge-planner "--workspace|'0.5,-0.5,-0.5,0.5' is not a box" --workspace 0.5,-0.5,-0.5,0.5
 bad nudge-planner "--lcm-url needs a value" --lcm-url
 
 common_cases nudge-adapter
@@ -318,6 +330,9 @@ bad nudge-up "--theta|'nan,1,1,1'" --theta nan,1,1,1
 bad nudge-up "--theta|'1,2,3'" --theta 1,2,3
 bad nudge-up "--theta|'1,2,3,4;touch x'" --theta '1,2,3,4;touch x'
 bad nudge-up "--theta|'1,2,3,4 5'" --theta '1,2,3,4 5'
+bad nudge-up "--workspace|'1,2,3'|XLO,YLO,XHI,YHI" --workspace 1,2,3
+bad nudge-up "--workspace|'1,2,3,4;touch x'" --workspace '1,2,3,4;touch x'
+bad nudge-up "--workspace needs a value" --workspace
 
 # Stand-ins for the programs: each records its argv (NUL-separated), its pid and its umask,
 # then runs until SIGINT/SIGTERM; nudge-tasks exits at once; nudge-status --wait says
@@ -375,10 +390,11 @@ LOGDIR="$W/logs with space;\$(touch $W/pwned6)"
 BUF="$W/buf dir/replay \`x\`.nrb"
 mkdir -p "$W/buf dir"
 THETA=0.3,0.005,1e-4,1
+WS=-0.4,-0.3,0.4,0.3
 
 ( umask 000
   exec "$FAKE/nudge-up" demo --lcm-url memq:// --log-dir "$LOGDIR" --buffer "$BUF" \
-    --theta "$THETA" --grace 2 --ready-timeout 5 \
+    --theta "$THETA" --workspace "$WS" --grace 2 --ready-timeout 5 \
     --bridge-arg "${EVIL[0]}" --bridge-arg "${EVIL[1]}" \
     --planner-arg --pop --planner-arg "${EVIL[2]}" \
     --executor-arg "${EVIL[3]}" --executor-arg "${EVIL[4]}" --executor-arg "${EVIL[5]}" \
@@ -391,9 +407,11 @@ else
   pt_fail "nudge-up demo with stand-ins did not finish within 30 s"
 fi
 [[ $PT_RC == 0 ]] || cat "$W/up.err"
-args_are nudge-bridge "${EVIL[0]}" "${EVIL[1]}"
-args_are nudge-executor "${EVIL[3]}" "${EVIL[4]}" "${EVIL[5]}"
-args_are nudge-planner --theta "$THETA" --pop "${EVIL[2]}"
+# --workspace reaches the three processes that keep to the box, ahead of the user's own
+# --X-arg (a later --workspace there wins).
+args_are nudge-bridge --workspace "$WS" "${EVIL[0]}" "${EVIL[1]}"
+args_are nudge-executor --workspace "$WS" "${EVIL[3]}" "${EVIL[4]}" "${EVIL[5]}"
+args_are nudge-planner --workspace "$WS" --theta "$THETA" --pop "${EVIL[2]}"
 args_are nudge-adapter --theta "$THETA" --buffer "$BUF" "${EVIL[6]}" "${EVIL[7]}"
 args_are nudge-tasks --record "$BUF" --theta "$THETA" --goal "${EVIL[8]}" "${EVIL[9]}" "${EVIL[4]}"
 pwned=$(find "$W" -name 'pwned[0-9]')

@@ -5,7 +5,10 @@
  * |j| <= j_max hold at every instant (what nd_exec guarantees), then |dp| <= v_max dt,
  * |dv| <= a_max dt and |da| <= j_max dt (= 6.5 m/s^2 per ms), across switches too,
  * because a switch continues p, v, a and j. Jerk itself is continuous at switches
- * (checked directly: the state just before and just after a new plan is equal). */
+ * (checked directly: the state just before and just after a new plan is equal).
+ *
+ * The tests of the limits run in a 200 m workspace (wide()), so that only the limits
+ * decide; the workspace has tests of its own, with the default box. */
 #include <string.h>
 
 #include "nd_test.h"
@@ -47,18 +50,26 @@ static void check_sample(const nd_exec_cfg *cfg, const double prev[2][4],
   st->samples++;
 }
 
+/* The default limits in a workspace no test of the limits reaches. */
+static nd_exec_cfg wide(void) {
+  nd_exec_cfg c = nd_exec_cfg_default();
+  c.ws_lo[0] = c.ws_lo[1] = -100.0;
+  c.ws_hi[0] = c.ws_hi[1] = 100.0;
+  return c;
+}
+
 static void assert_state_equal(const double a[2][4], const double b[2][4]) {
   for (int ax = 0; ax < 2; ax++)
     for (int k = 0; k < 4; k++)
       assert_near(a[ax][k], b[ax][k], 1e-9 * (1.0 + fabs(a[ax][k])));
 }
 
-/* A random keypoint in a 1 m square with speed up to v_max. */
-static void random_key(nd_rng *r, const nd_exec_cfg *cfg, double key[4]) {
+/* A random keypoint in a square of side span m about 0 with speed up to v_max. */
+static void random_key(nd_rng *r, const nd_exec_cfg *cfg, double span, double key[4]) {
   const double speed = cfg->v_max * nd_rng_uniform(r);
   const double dir = 2.0 * ND_PI * nd_rng_uniform(r);
-  key[0] = nd_rng_uniform(r) - 0.5;
-  key[1] = nd_rng_uniform(r) - 0.5;
+  key[0] = span * (nd_rng_uniform(r) - 0.5);
+  key[1] = span * (nd_rng_uniform(r) - 0.5);
   key[2] = speed * cos(dir);
   key[3] = speed * sin(dir);
 }
@@ -87,6 +98,21 @@ static void test_cfg(void **state) {
   cfg = nd_exec_cfg_default();
   cfg.t_max = cfg.t_min;
   assert_int_equal(nd_exec_cfg_check(&cfg, err, sizeof err), ND_EXEC_EINVAL);
+  /* The workspace: the planner's box by default; finite, lo < hi, margin >= 0. */
+  cfg = nd_exec_cfg_default();
+  assert_true(cfg.ws_lo[0] == -0.5 && cfg.ws_lo[1] == -0.5 && cfg.ws_hi[0] == 0.5 &&
+              cfg.ws_hi[1] == 0.5 && cfg.ws_margin == 0.04);
+  const double bad_lo[4] = {NAN, 0.5, -INFINITY, 0.6};
+  for (int i = 0; i < 4; i++) {
+    cfg = nd_exec_cfg_default();
+    cfg.ws_lo[i & 1] = bad_lo[i];
+    assert_int_equal(nd_exec_cfg_check(&cfg, err, sizeof err), ND_EXEC_EINVAL);
+    assert_non_null(strstr(err, "workspace"));
+  }
+  cfg = nd_exec_cfg_default();
+  cfg.ws_margin = -0.01;
+  assert_int_equal(nd_exec_cfg_check(&cfg, err, sizeof err), ND_EXEC_EINVAL);
+  assert_non_null(strstr(err, "margin"));
   assert_string_equal(nd_exec_mode_name(ND_EXEC_HOLD), "holding");
 }
 
@@ -162,7 +188,7 @@ static void test_reaches_key(void **state) {
 /* A far keypoint is stretched just enough: within limits, close to the binding one. */
 static void test_stretches(void **state) {
   (void)state;
-  const nd_exec_cfg cfg = nd_exec_cfg_default();
+  const nd_exec_cfg cfg = wide();
   nd_exec ex;
   const double p[2] = {0.0, 0.0}, key[4] = {0.8, 0.0, 0.0, 0.0};
   char err[128];
@@ -201,7 +227,7 @@ static void test_stretches(void **state) {
  * unbounded jerk), speed never rising, then holds exactly still. */
 static void test_brake_from_full_speed(void **state) {
   (void)state;
-  const nd_exec_cfg cfg = nd_exec_cfg_default();
+  const nd_exec_cfg cfg = wide();
   nd_exec ex;
   const double p[2] = {0.0, 0.0}, key[4] = {0.6, 0.0, 1.69, 0.0};
   char err[128];
@@ -237,15 +263,21 @@ static void test_brake_from_full_speed(void **state) {
 
 /* Plans every 50 ms at a jittery 1 kHz, with stale spells and resumption. near > 0:
  * keypoints within near metres of the setpoint at up to 0.3 m/s (the pushing regime);
- * near == 0: anywhere in a 1 m square at up to v_max (adversarial). */
+ * near == 0: anywhere in a square of side span at up to v_max (adversarial). Refusals
+ * must be for the limits (not reachable) or the workspace (counted by kind), and every
+ * setpoint must lie within the workspace plus its margin. */
 typedef struct {
   int plans, accepted, stretched, stops, resumed_from_hold;
+  int box_key, box_seg, box_brake;   /* refused for the workspace: keypoint, segment, brake */
   double worst_rest, worst_plan_stretch;
+  double worst_out;                  /* farthest setpoint beyond the box, m */
+  long outside;                      /* setpoints beyond the box plus margin */
   run_stats st;
 } switch_stats;
 
-static void run_switching(uint64_t seed, double near, int steps, switch_stats *out_stats) {
-  const nd_exec_cfg cfg = nd_exec_cfg_default();
+static void run_switching(const nd_exec_cfg *cfgp, uint64_t seed, double near, double span,
+                          int steps, switch_stats *out_stats) {
+  const nd_exec_cfg cfg = *cfgp;
   nd_rng r;
   nd_rng_seed(&r, seed, 1);
   nd_exec ex;
@@ -267,7 +299,7 @@ static void run_switching(uint64_t seed, double near, int steps, switch_stats *o
     if (!stale && t >= next_plan) {
       double key[4], before[2][4], after[2][4];
       const int was_hold = ex.mode == ND_EXEC_HOLD;
-      random_key(&r, &cfg, key);
+      random_key(&r, &cfg, span, key);
       if (near > 0.0) {
         key[0] = prev[0][ND_P] + 2.0 * near * (key[0]);
         key[1] = prev[1][ND_P] + 2.0 * near * (key[1]);
@@ -287,6 +319,12 @@ static void run_switching(uint64_t seed, double near, int steps, switch_stats *o
         nd_exec_eval(&ex, t, after);
         assert_state_equal(before, after); /* continuous in p, v, a and j */
         assert_int_equal(ex.mode, ND_EXEC_TRACK);
+      } else if (rc == ND_EXEC_EBOX) {
+        if (strstr(err, "outside the workspace")) S.box_key++;
+        else if (strstr(err, "the segment to keypoint")) S.box_seg++;
+        else if (strstr(err, "the brake after the segment")) S.box_brake++;
+        else fail_msg("workspace refusal without a known reason: %s", err);
+        assert_true(memcmp(&snapshot, &ex, sizeof ex) == 0);
       } else {
         assert_int_equal(rc, ND_EXEC_ELIMIT);
         assert_non_null(strstr(err, "not reachable"));
@@ -304,6 +342,11 @@ static void run_switching(uint64_t seed, double near, int steps, switch_stats *o
     }
     const int mode = nd_exec_step(&ex, &cfg, t, stale, out);
     check_sample(&cfg, prev, out, dt, &S.st);
+    for (int ax = 0; ax < 2; ax++) {
+      const double beyond = fmax(cfg.ws_lo[ax] - out[ax][ND_P], out[ax][ND_P] - cfg.ws_hi[ax]);
+      S.worst_out = fmax(S.worst_out, beyond);
+      if (beyond > cfg.ws_margin + 1e-12) S.outside++;
+    }
     if (stale && mode == ND_EXEC_HOLD) {
       for (int k = 1; k < 4; k++) assert_true(out[0][k] == 0.0 && out[1][k] == 0.0);
       if (at_rest) assert_true(memcmp(out, prev, sizeof out) == 0); /* exactly still */
@@ -313,7 +356,9 @@ static void run_switching(uint64_t seed, double near, int steps, switch_stats *o
       }
       at_rest = 1;
     }
-    if (!stale) promise = -1.0;
+    /* A stale spell can begin after the segment ended (braking already): at_rest must not
+     * carry over from the last spell then. */
+    if (!stale) promise = -1.0, at_rest = 0;
     memcpy(prev, out, sizeof prev);
   }
   *out_stats = S;
@@ -334,9 +379,9 @@ static void print_switch_stats(const char *name, const switch_stats *S) {
 
 static void test_random_switching(void **state) {
   (void)state;
-  const nd_exec_cfg cfg = nd_exec_cfg_default();
+  const nd_exec_cfg cfg = wide();
   switch_stats S;
-  run_switching(12345, 0.0, 10000, &S);
+  run_switching(&cfg, 12345, 0.0, 1.0, 10000, &S);
   print_switch_stats("random", &S);
   /* The limits must have been binding, or this test proved nothing about them. */
   assert_true(S.st.peak[0] > 0.95 * cfg.v_max);
@@ -353,18 +398,126 @@ static void test_random_switching(void **state) {
 
 static void test_pushing_switching(void **state) {
   (void)state;
+  const nd_exec_cfg cfg = wide();
   switch_stats S;
-  run_switching(777, 0.1, 10000, &S);
+  run_switching(&cfg, 777, 0.1, 1.0, 10000, &S);
   print_switch_stats("pushing", &S);
   assert_int_equal(S.accepted, S.plans); /* the working regime: nothing refused */
   assert_true(S.stops >= 3);
   assert_true(S.worst_rest < 0.3);
 }
 
+/* The default workspace against adversarial plans: keypoints in a 1.2 m square (so some
+ * lie outside the 1 m box) at up to v_max, stale spells included. Keypoints outside and
+ * segments overshooting are refused (a brake leaving the margin is rarer here than a plan
+ * the limits refuse first: test_workspace has one), many plans are still taken, and no
+ * setpoint (segments, planned brakes, brakes begun on going stale) gets beyond the box by
+ * more than the margin. */
+static void test_workspace_switching(void **state) {
+  (void)state;
+  const nd_exec_cfg cfg = nd_exec_cfg_default();
+  switch_stats S;
+  run_switching(&cfg, 4242, 0.0, 1.2, 60000, &S);
+  print_switch_stats("workspace", &S);
+  printf("exec_workspace_refused_keypoint %d\nexec_workspace_refused_segment %d\n"
+         "exec_workspace_refused_brake %d\nexec_workspace_worst_beyond_box %.4f m (margin %g)\n",
+         S.box_key, S.box_seg, S.box_brake, S.worst_out, cfg.ws_margin);
+  assert_int_equal(S.outside, 0);
+  assert_true(S.worst_out <= cfg.ws_margin);
+  assert_true(S.worst_out > 0.0);  /* the margin was used: the check was not vacuous */
+  assert_true(S.box_key > 0 && S.box_seg > 0);
+  assert_true(S.accepted > S.plans / 3);
+  assert_true(S.stops >= 5);
+}
+
+/* A keypoint outside the box is refused, names itself and the box, and changes nothing:
+ * the setpoint goes on where it was going and never toward the refused keypoint. One
+ * inside is followed. A keypoint on the edge is taken while its brake stays within the
+ * margin, and refused once the brake would carry the robot beyond it. */
+static void test_workspace(void **state) {
+  (void)state;
+  const nd_exec_cfg cfg = nd_exec_cfg_default();
+  nd_exec ex, snapshot;
+  const double p[2] = {0.1, 0.0};
+  char err[200];
+  double out[2][4];
+  nd_exec_init(&ex, p, 0.0);
+  snapshot = ex;
+  const double out_key[4] = {0.8, 0.0, 0.0, 0.0};
+  assert_int_equal(nd_exec_plan(&ex, &cfg, 0.0, out_key, 0.3, err, sizeof err), ND_EXEC_EBOX);
+  assert_non_null(strstr(err, "keypoint 0 (0.800, 0.000)"));
+  assert_non_null(strstr(err, "x [-0.500, 0.500], y [-0.500, 0.500]"));
+  assert_true(memcmp(&snapshot, &ex, sizeof ex) == 0);
+  for (int i = 1; i <= 500; i++) {
+    assert_int_equal(nd_exec_step(&ex, &cfg, 0.001 * i, 0, out), ND_EXEC_HOLD);
+    assert_true(out[0][ND_P] == 0.1 && out[1][ND_P] == 0.0);
+  }
+
+  /* In the box: followed to the keypoint. */
+  const double in_key[4] = {0.3, 0.1, 0.0, 0.0};
+  assert_int_equal(nd_exec_plan(&ex, &cfg, 0.5, in_key, 0.3, err, sizeof err), ND_EXEC_OK);
+  /* Refused mid-segment: the segment toward in_key goes on unchanged. */
+  nd_exec_step(&ex, &cfg, 0.6, 0, out);
+  snapshot = ex;
+  assert_int_equal(nd_exec_plan(&ex, &cfg, 0.6, out_key, 0.3, err, sizeof err), ND_EXEC_EBOX);
+  assert_true(memcmp(&snapshot, &ex, sizeof ex) == 0);
+  for (int i = 1; i <= 400; i++) nd_exec_step(&ex, &cfg, 0.6 + 0.001 * i, 0, out);
+  assert_int_equal(ex.mode, ND_EXEC_HOLD);
+  assert_near(out[0][ND_P], 0.3, 1e-9);
+  assert_near(out[1][ND_P], 0.1, 1e-9);
+
+  /* Later keypoints count too. */
+  const double keys[3][4] = {{0.3, 0.1, 0, 0}, {0.4, 0.2, 0, 0}, {0.45, -0.51, 0, 0}};
+  assert_int_equal(nd_exec_keys_check(&cfg, keys, 2, err, sizeof err), ND_EXEC_OK);
+  assert_int_equal(nd_exec_keys_check(&cfg, keys, 3, err, sizeof err), ND_EXEC_EBOX);
+  assert_non_null(strstr(err, "keypoint 2 (0.450, -0.510)"));
+  const double nan_keys[1][4] = {{NAN, 0.0, 0.0, 0.0}};
+  assert_int_equal(nd_exec_keys_check(&cfg, nan_keys, 1, err, sizeof err), ND_EXEC_EBOX);
+
+  /* On the edge moving outward: the brake travels 15/16 v^2 / a_max beyond it, 1.8 cm at
+   * 0.5 m/s (taken), 7.2 cm at 1 m/s (beyond the 4 cm margin: refused). */
+  const double edge_slow[4] = {0.5, 0.1, 0.5, 0.0}, edge_fast[4] = {0.5, 0.1, 1.0, 0.0};
+  snapshot = ex;
+  assert_int_equal(nd_exec_plan(&ex, &cfg, 1.0, edge_fast, 0.3, err, sizeof err),
+                   ND_EXEC_EBOX);
+  assert_non_null(strstr(err, "the brake after the segment to keypoint (0.500, 0.100)"));
+  assert_non_null(strstr(err, "0.040 m margin"));
+  assert_true(memcmp(&snapshot, &ex, sizeof ex) == 0);
+  assert_int_equal(nd_exec_plan(&ex, &cfg, 1.0, edge_slow, 0.3, err, sizeof err), ND_EXEC_OK);
+  assert_true(ex.hold[0] > 0.5 && ex.hold[0] <= 0.5 + cfg.ws_margin);
+
+  /* Going stale on a segment that runs along the edge at speed: braking at once would
+   * stop 5.4 cm beyond x = -0.5, so the brake departs later (a candidate that stays
+   * within the margin), and every setpoint to rest stays inside it. */
+  const double corner[2] = {-0.5, -0.5};
+  const double k1[4] = {-0.25, -0.4, 0.5, -0.1}, k2[4] = {-0.5, -0.05, 0.5, 0.8};
+  nd_exec_init(&ex, corner, 0.0);
+  assert_int_equal(nd_exec_plan(&ex, &cfg, 0.0, k1, 0.5, err, sizeof err), ND_EXEC_OK);
+  assert_int_equal(nd_exec_plan(&ex, &cfg, 0.3, k2, 0.335, err, sizeof err), ND_EXEC_OK);
+  double t = 0.595, x_min = 0.0;
+  assert_int_equal(nd_exec_step(&ex, &cfg, t, 1, out), ND_EXEC_STOPPING);
+  assert_true(ex.t_brake > t);
+  while (ex.mode != ND_EXEC_HOLD && t < 2.0) {
+    t += 0.001;
+    nd_exec_step(&ex, &cfg, t, 1, out);
+    x_min = fmin(x_min, out[0][ND_P]);
+  }
+  printf("exec_workspace_stale_brake_x_min %.4f m\n", x_min);
+  assert_int_equal(ex.mode, ND_EXEC_HOLD);
+  assert_true(x_min >= -0.5 - cfg.ws_margin);
+
+  /* Started outside the box (the first measured position): nothing moves it further, and
+   * no plan is taken, since the segment would begin beyond the margin. */
+  const double far_p[2] = {0.7, 0.0};
+  nd_exec_init(&ex, far_p, 2.0);
+  assert_int_equal(nd_exec_plan(&ex, &cfg, 2.0, in_key, 0.3, err, sizeof err), ND_EXEC_EBOX);
+  assert_non_null(strstr(err, "the segment to keypoint (0.300, 0.100) reaches x = 0.700"));
+}
+
 /* A fresh plan while braking, or from rest, starts continuously and tracks again. */
 static void test_resume(void **state) {
   (void)state;
-  const nd_exec_cfg cfg = nd_exec_cfg_default();
+  const nd_exec_cfg cfg = wide();
   nd_exec ex;
   const double p[2] = {0.0, 0.0}, key[4] = {0.3, 0.1, 0.5, 0.2};
   const double key2[4] = {-0.2, 0.2, 0.0, -0.4};
@@ -429,7 +582,7 @@ static void test_resume(void **state) {
  * while braking or holding. */
 static void test_heading_to(void **state) {
   (void)state;
-  const nd_exec_cfg cfg = nd_exec_cfg_default();
+  const nd_exec_cfg cfg = wide();
   nd_exec ex;
   const double p[2] = {0.06, -0.042}, key[4] = {0.085, -0.038, 0.25, 0.04};
   const double far[4] = {0.45, 0.3, 0.2, 0.0};
@@ -460,7 +613,7 @@ static void test_heading_to(void **state) {
 /* Bad plans are refused with a message and change nothing. */
 static void test_rejects(void **state) {
   (void)state;
-  const nd_exec_cfg cfg = nd_exec_cfg_default();
+  const nd_exec_cfg cfg = wide();
   nd_exec ex, snapshot;
   const double p[2] = {0.1, 0.1}, ok[4] = {0.2, 0.1, 0.3, 0.0};
   char err[160];
@@ -521,6 +674,8 @@ int main(void) {
       cmocka_unit_test(test_pushing_switching),
       cmocka_unit_test(test_resume),
       cmocka_unit_test(test_heading_to),
+      cmocka_unit_test(test_workspace),
+      cmocka_unit_test(test_workspace_switching),
       cmocka_unit_test(test_rejects),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);

@@ -10,8 +10,8 @@
  * open and go on to __real_X. One window spans 100k+ cycles on synthetic time, through
  * the first robot state, plan switches at 20 Hz, plans stretched by the limits and plans
  * refused by them, a stale plan (brake, hold), a stale robot state (brake, hold, plans
- * kept waiting), and a consumer that stops draining the ring until it is full. The
- * count over the window must be exactly 0.
+ * kept waiting), plans refused for a keypoint outside the workspace, and a consumer that
+ * stops draining the ring until it is full. The count over the window must be exactly 0.
  *
  * That the count can fail is checked first: mallocs, a free and a write made inside a
  * window, from this file and from inside nd_core, are all seen.
@@ -273,7 +273,7 @@ enum { PH_PLAN_STALE = 1500, PH_PLAN_BACK = 2200, PH_STATE_STALE = 2700,
 typedef struct {
   long cycles, ret_none, ret_sent, ret_full;
   long popped, decode_bad, seq_gaps;
-  long plans_posted, plans_far, plans_bad, stretched;
+  long plans_posted, plans_far, plans_bad, plans_out, stretched;
   long plans_late;                       /* sent LATE_S ago, taken while the state is live */
   long track_no_plan, track_old_plan;    /* tracking setpoints naming no plan / a stale one */
   double plan_age_max;                   /* s, oldest plan a tracking setpoint named */
@@ -303,7 +303,8 @@ static int plan_is_late(long k) { return k % 13 == 0; }
 
 /* A plan toward a keypoint near p: mostly reachable ones (T 0.3 s, as the planner's),
  * every 7th far and fast to do (the limits stretch it), every 11th faster than v_max at
- * the keypoint (refused); late ones are reachable. */
+ * the keypoint (refused), every 17th with its second keypoint outside the workspace
+ * (refused); late ones are reachable. */
 static void make_plan(nd_rng *r, long k, const double p[2], const nd_exec_cfg *cfg,
                       ndp_execloop_plan_in *pl, run_stats *st) {
   const double dir = 2.0 * ND_PI * nd_rng_uniform(r);
@@ -323,8 +324,14 @@ static void make_plan(nd_rng *r, long k, const double p[2], const nd_exec_cfg *c
     double x = p[ax] + reach * c;
     if (x > 0.5) x = 0.5;
     if (x < -0.5) x = -0.5;
-    pl->key[ax] = x;
-    pl->key[2 + ax] = speed * c;
+    pl->keys[0][ax] = x;
+    pl->keys[0][2 + ax] = speed * c;
+  }
+  pl->M = 2;
+  memcpy(pl->keys[1], pl->keys[0], sizeof pl->keys[1]);
+  if (!plan_is_late(k) && k % 11 && k % 7 && k % 17 == 0) {
+    pl->keys[1][0] = 0.8;
+    st->plans_out++;
   }
   pl->plan_id = k;
   st->plans_posted++;
@@ -482,6 +489,7 @@ static void test_cycle_allocates_nothing(void **state) {
   printf("rtloop_blocking_calls %ld count\n", n_block);
   printf("rtloop_plans_accepted %lld count\n", (long long)st.rep.accepted);
   printf("rtloop_plans_refused %lld count\n", (long long)st.rep.refused);
+  printf("rtloop_plans_refused_workspace %lld count\n", (long long)st.rep.refused_box);
   printf("rtloop_plans_stretched %ld count\n", st.stretched);
   printf("rtloop_plans_late %lld count\n", (long long)st.rep.late);
   printf("rtloop_plan_age_max %.1f ms\n", 1e3 * st.plan_age_max);
@@ -503,6 +511,8 @@ static void test_cycle_allocates_nothing(void **state) {
   assert_int_equal(st.rep.cycles, st.cycles);
   assert_true(st.rep.accepted >= 20 * EPISODES);        /* plan switches */
   assert_true(st.rep.refused >= EPISODES);              /* limits: refused */
+  assert_true(st.plans_out > 0);                        /* workspace: refused */
+  assert_true(st.rep.refused_box >= EPISODES / 2);
   assert_true(st.stretched >= EPISODES);                /* limits: stretched */
   assert_true(st.plans_far > 0 && st.plans_bad > 0);
   assert_true(st.plans_late >= EPISODES);               /* sent long ago: dropped */
@@ -566,7 +576,8 @@ static void test_resent_plan_after_restart(void **state) {
       pl.T = 0.3;
       const double f = 0.01 * (double)(k / 50);
       double k0[4] = {start[0] + 0.02 + f, start[1] + 0.5 * f, 0.1, 0.05};
-      memcpy(pl.key, k0, sizeof k0);
+      pl.M = 1;
+      memcpy(pl.keys[0], k0, sizeof k0);
       nd_mailbox_post(&g_io.plan, &pl, (int)sizeof pl);
     } else if (k >= BACK && k % 50 == 0) {
       if (k == BACK) {
@@ -578,7 +589,8 @@ static void test_resent_plan_after_restart(void **state) {
       }
       pl.plan_id = 1 + (k - BACK) / 50;  /* the restarted planner counts from 1 */
       pl.T = 0.25;
-      memcpy(pl.key, key, sizeof key);
+      pl.M = 1;
+      memcpy(pl.keys[0], key, sizeof key);
       nd_mailbox_post(&g_io.plan, &pl, (int)sizeof pl);
       last_id = pl.plan_id;
     }
@@ -624,11 +636,114 @@ static void test_resent_plan_after_restart(void **state) {
   assert_true(rep.kept >= 4);
 }
 
+/* The workspace at the loop: a plan whose keypoint lies at (0.8, 0), outside the default
+ * box, is refused and counted, and the robot stays exactly where it is (no plan was ever
+ * taken: it holds). A plan inside the box is then followed to its keypoint. Plans whose
+ * first keypoint is inside but whose second is at (0.8, 0) are refused too, and the robot
+ * stays at rest where the good plan left it. */
+static void test_workspace_plans(void **state) {
+  (void)state;
+  const nd_exec_cfg cfg = nd_exec_cfg_default();
+  ndp_execloop_io_init(&g_io);
+  ndp_execloop_init(&g_loop, &cfg, TIMEOUT, &g_io);
+  enum { IN = 500, BAD2 = 1000, END = 1500 };  /* ms: phase starts */
+  const double start[2] = {0.1, 0.0}, out_key[4] = {0.8, 0.0, 0.0, 0.0};
+  const double in_key[4] = {0.3, 0.1, 0.0, 0.0}, in_next[4] = {0.35, 0.1, 0.0, 0.0};
+  double p[2] = {start[0], start[1]};
+  double x_max_out = -1.0, x_max_bad2 = -1.0, p_in[2] = {0.0, 0.0};
+  long posted_out = 0, posted_bad2 = 0, moved_out = 0, moved_bad2 = 0;
+  int64_t refused_at_in = 0, box_at_in = 0, refused_at_bad2 = 0;
+  char why_out[160] = "", why_bad2[160] = "";
+  window_open();
+  for (long k = 0; k < END; k++) {
+    const double now = T0 + DT * (double)k;
+    const int64_t utime = U0 + 1000 * k;
+    ndp_execloop_state_in in = {now - 2e-4, {p[0], p[1], 0.025}};
+    nd_mailbox_post(&g_io.state, &in, (int)sizeof in);
+    if (k % 50 == 0) {
+      ndp_execloop_plan_in pl;
+      memset(&pl, 0, sizeof pl);
+      pl.t_arrive = now - 2e-4;
+      pl.utime = utime - 200;
+      pl.plan_id = 1 + k / 50;
+      pl.T = 0.3;
+      pl.M = 2;
+      if (k < IN) {
+        memcpy(pl.keys[0], out_key, sizeof out_key);
+        memcpy(pl.keys[1], out_key, sizeof out_key);
+        posted_out++;
+      } else if (k < BAD2) {
+        memcpy(pl.keys[0], in_key, sizeof in_key);
+        memcpy(pl.keys[1], in_next, sizeof in_next);
+      } else {
+        memcpy(pl.keys[0], in_next, sizeof in_next);
+        memcpy(pl.keys[1], out_key, sizeof out_key);
+        posted_bad2++;
+      }
+      nd_mailbox_post(&g_io.plan, &pl, (int)sizeof pl);
+    }
+    if (k == IN) {
+      refused_at_in = g_loop.rep.refused;
+      box_at_in = g_loop.rep.refused_box;
+      memcpy(why_out, g_loop.rep.refused_why, sizeof why_out);
+    }
+    if (k == BAD2) {
+      refused_at_bad2 = g_loop.rep.refused;
+      p_in[0] = p[0], p_in[1] = p[1];
+    }
+    ndp_execloop_cycle(&g_loop, now, utime);
+    unsigned char buf[ND_RTIO_MAX];
+    int tag, len;
+    while ((len = nd_ring_pop(&g_io.ring, &tag, buf, sizeof buf)) >= 0) {
+      nudge_ee_cmd_t m;
+      if (tag != NDP_EXECLOOP_TAG_EE_CMD || nudge_ee_cmd_t_decode(buf, 0, len, &m) != len)
+        continue;
+      p[0] = m.p[0], p[1] = m.p[1];
+      if (k < IN) {
+        x_max_out = fmax(x_max_out, m.p[0]);
+        moved_out += m.p[0] != start[0] || m.p[1] != start[1] || m.mode != ND_EXEC_HOLD;
+      } else if (k >= BAD2) {
+        x_max_bad2 = fmax(x_max_bad2, m.p[0]);
+        /* At rest on its keypoint, re-planned there: rounding moves it by ~1e-17 m. */
+        moved_bad2 += hypot(m.p[0] - p_in[0], m.p[1] - p_in[1]) > 1e-9;
+      }
+    }
+  }
+  window_close();
+  memcpy(why_bad2, g_loop.rep.refused_why, sizeof why_bad2);
+  const long n_calls = window_sum(0, N_FN);
+  printf("rtloop_workspace_refused %lld count (of %ld + %ld posted outside)\n",
+         (long long)g_loop.rep.refused, posted_out, posted_bad2);
+  printf("rtloop_workspace_x_max_while_refusing %.6f m\n", x_max_out);
+  printf("rtloop_workspace_reached (%.4f, %.4f) m\n", p_in[0], p_in[1]);
+  printf("rtloop_workspace_why_first: %s\nrtloop_workspace_why_second: %s\n", why_out,
+         why_bad2);
+  assert_int_equal(n_calls, 0);
+  /* Refused and counted, each one; the robot never moved toward (0.8, 0). */
+  assert_int_equal(refused_at_in, posted_out);
+  assert_int_equal(box_at_in, posted_out);
+  assert_non_null(strstr(why_out, "keypoint 0 (0.800, 0.000) is outside the workspace"));
+  assert_non_null(strstr(why_out, "x [-0.500, 0.500], y [-0.500, 0.500]"));
+  assert_int_equal(moved_out, 0);
+  assert_true(x_max_out == start[0]);
+  /* The plan in the box is followed to its keypoint. */
+  assert_near(p_in[0], in_key[0], 1e-6);
+  assert_near(p_in[1], in_key[1], 1e-6);
+  /* A later keypoint outside refuses the plan too: no step toward (0.35, 0.1) or beyond. */
+  assert_int_equal(g_loop.rep.refused - refused_at_bad2, posted_bad2);
+  assert_int_equal(g_loop.rep.refused_box, posted_out + posted_bad2);
+  assert_non_null(strstr(why_bad2, "keypoint 1 (0.800, 0.000)"));
+  assert_int_equal(moved_bad2, 0);
+  assert_true(x_max_bad2 <= p_in[0] + 1e-9);
+  assert_int_equal(g_loop.rep.mode, ND_EXEC_HOLD);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_counter_sees_calls),
       cmocka_unit_test(test_cycle_allocates_nothing),
       cmocka_unit_test(test_resent_plan_after_restart),
+      cmocka_unit_test(test_workspace_plans),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
