@@ -128,6 +128,15 @@ void ndp_refused(ndp_ratelog *rl, const char *prog, const char *what, const char
   if (rl->count >= NDP_RATELOG_FIRST) rl->next = now + NDP_RATELOG_EVERY;
 }
 
+int ndp_decode_why(int status, int size, const char *type, char *why, int len) {
+  if (status >= 0 && status == size) return 0;
+  if (status < 0)
+    snprintf(why, (size_t)len, "%d bytes do not decode as %s", size, type);
+  else
+    snprintf(why, (size_t)len, "%d bytes after a %s", size - status, type);
+  return -1;
+}
+
 int ndp_default_threads(void) {
   long n = sysconf(_SC_NPROCESSORS_ONLN);
   long t = n <= 4 ? n - 1 : n - 2;

@@ -6,6 +6,7 @@
 #include <lcm/lcm.h>
 #include <signal.h>
 #include <stdint.h>
+#include <string.h>
 
 #include "nd_jitter.h"
 
@@ -95,6 +96,32 @@ typedef struct {
 
 /* Count one refusal and print "<prog>: refused <what>: <why> (<count> so far)" if due. */
 void ndp_refused(ndp_ratelog *rl, const char *prog, const char *what, const char *why);
+
+/* Typed input without lcm-gen's subscribe wrapper, which prints a line to stderr for each
+ * message that does not decode and drops it uncounted (a flood of garbage then grows the
+ * logs without bound). NDP_TYPED_HANDLER(T, name, handler, bad) defines
+ * `static void name(const lcm_recv_buf_t *, const char *, void *)` for lcm_subscribe: it
+ * decodes a T and calls handler(rb, channel, &msg, user) as lcm-gen's wrapper would, or,
+ * when the bytes are not exactly one T, bad(user, channel, why) for the caller to count
+ * and log (ndp_refused). */
+#define NDP_TYPED_HANDLER(T, name, handler, bad)                                       \
+  static void name(const lcm_recv_buf_t *rb_, const char *ch_, void *user_) {          \
+    T m_;                                                                              \
+    char why_[128];                                                                    \
+    memset(&m_, 0, sizeof(m_));                                                        \
+    const int st_ = T##_decode(rb_->data, 0, (int)rb_->data_size, &m_);                \
+    if (ndp_decode_why(st_, (int)rb_->data_size, #T, why_, (int)sizeof(why_))) {       \
+      if (st_ >= 0) T##_decode_cleanup(&m_);                                           \
+      bad(user_, ch_, why_);                                                           \
+      return;                                                                          \
+    }                                                                                  \
+    handler(rb_, ch_, &m_, user_);                                                     \
+    T##_decode_cleanup(&m_);                                                           \
+  }
+
+/* For NDP_TYPED_HANDLER: 0 when a decoder's result status consumed all size bytes, else
+ * -1 with why saying so ("N bytes do not decode as T", "N bytes after a T"). */
+int ndp_decode_why(int status, int size, const char *type, char *why, int len);
 
 /* Rollout workers that leave the 1 kHz processes a core: cores - 1 up to 4 cores,
  * cores - 2 above, at least 1. */

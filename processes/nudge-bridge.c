@@ -344,6 +344,16 @@ static void on_ee_cmd(const lcm_recv_buf_t *rbuf, const char *channel,
   nd_mailbox_post(&io->b->cmd, &c, sizeof(c));
 }
 
+/* Bytes on EE_CMD that are not one nudge_ee_cmd_t. */
+static void undecodable(void *user, const char *ch, const char *why) {
+  io_ctx *io = user;
+  io->status->received++;
+  io->status->rejected++;
+  ndp_refused(&io->refused, PROG, ch, why);
+}
+
+NDP_TYPED_HANDLER(nudge_ee_cmd_t, on_ee_cmd_raw, on_ee_cmd, undecodable)
+
 /* Publish what the RT thread has encoded. Return the number of failed publishes. */
 static int publish_ring(lcm_t *lcm, bridge *b, ndp_status *st) {
   int tag, n, failed = 0;
@@ -521,7 +531,7 @@ int main(int argc, char **argv) {
 
   bridge *b = calloc(1, sizeof(*b));  /* the ring is 256 KB: not on the stack */
   lcm_t *lcm = NULL;
-  nudge_ee_cmd_t_subscription_t *sub = NULL;
+  lcm_subscription_t *sub = NULL;
   int status = 1, started = 0;
   pthread_t rt;
   if (!b) {
@@ -620,7 +630,7 @@ int main(int argc, char **argv) {
   rt_stats rs = {0};
   st.loop = &rs.loop;
   io_ctx io = {.b = b, .status = &st};
-  if (!(sub = nudge_ee_cmd_t_subscribe(lcm, NDP_CH_EE_CMD, on_ee_cmd, &io))) {
+  if (!(sub = lcm_subscribe(lcm, NDP_CH_EE_CMD, on_ee_cmd_raw, &io))) {
     fprintf(stderr, "%s: cannot subscribe to %s\n", PROG, NDP_CH_EE_CMD);
     goto done;
   }
@@ -728,7 +738,7 @@ done:
     atomic_store(&b->stop, 1);
     pthread_join(rt, NULL);
   }
-  if (sub) nudge_ee_cmd_t_unsubscribe(lcm, sub);
+  if (sub) lcm_unsubscribe(lcm, sub);
   if (lcm) lcm_destroy(lcm);
   if (b->d) mj_deleteData(b->d);
   nds_model_free(&b->nm);

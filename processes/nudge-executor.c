@@ -194,6 +194,17 @@ static void on_plan(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_plan
   nd_mailbox_post(&c->io->x.plan, &in, (int)sizeof(in));
 }
 
+/* Bytes on ROBOT_STATE or PLAN that are not one message of the channel's type. */
+static void undecodable(void *user, const char *ch, const char *why) {
+  io_ctx *c = user;
+  c->st.received++;
+  c->st.rejected++;
+  ndp_refused(strcmp(ch, NDP_CH_PLAN) ? &c->log_state : &c->log_plan, PROG, ch, why);
+}
+
+NDP_TYPED_HANDLER(nudge_robot_state_t, on_state_raw, on_state, undecodable)
+NDP_TYPED_HANDLER(nudge_plan_t, on_plan_raw, on_plan, undecodable)
+
 static void say_stale(int bits, double timeout) {
   if (bits & NDP_STALE_STATE)
     fprintf(stderr, PROG ": stale: no ROBOT_STATE for %g s: braking to rest and holding\n",
@@ -387,9 +398,9 @@ int main(int argc, char **argv) {
   c.timeout = opt.timeout;
   ndp_status_init(&c.st, PROG);
   c.st.state = "waiting";
-  nudge_robot_state_t_subscription_t *sub_state =
-      nudge_robot_state_t_subscribe(lcm, NDP_CH_ROBOT_STATE, on_state, &c);
-  nudge_plan_t_subscription_t *sub_plan = nudge_plan_t_subscribe(lcm, NDP_CH_PLAN, on_plan, &c);
+  lcm_subscription_t *sub_state =
+      lcm_subscribe(lcm, NDP_CH_ROBOT_STATE, on_state_raw, &c);
+  lcm_subscription_t *sub_plan = lcm_subscribe(lcm, NDP_CH_PLAN, on_plan_raw, &c);
   if (!sub_state || !sub_plan) {
     fprintf(stderr, PROG ": cannot subscribe to " NDP_CH_ROBOT_STATE " and " NDP_CH_PLAN "\n");
     lcm_destroy(lcm);
@@ -496,8 +507,8 @@ int main(int argc, char **argv) {
           (long long)last.late,
           (long long)c.log_old.count);
   close(io.bell);
-  nudge_robot_state_t_unsubscribe(lcm, sub_state);
-  nudge_plan_t_unsubscribe(lcm, sub_plan);
+  lcm_unsubscribe(lcm, sub_state);
+  lcm_unsubscribe(lcm, sub_plan);
   lcm_destroy(lcm);
   return code;
 }

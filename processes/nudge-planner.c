@@ -433,6 +433,20 @@ static void on_params(const lcm_recv_buf_t *rb, const char *ch, const nudge_para
           m->theta_mean[0], m->theta_mean[1], m->theta_mean[2], m->theta_mean[3]);
 }
 
+/* Bytes on a typed channel that are not one message of its type: counted and logged
+ * like any refused input. */
+static void undecodable(void *user, const char *ch, const char *why) {
+  proc *p = user;
+  p->st.received++;
+  reject(p, ch, why);
+}
+
+NDP_TYPED_HANDLER(nudge_mocap_t, on_mocap_raw, on_mocap, undecodable)
+NDP_TYPED_HANDLER(nudge_robot_state_t, on_robot_state_raw, on_robot_state, undecodable)
+NDP_TYPED_HANDLER(nudge_ee_cmd_t, on_ee_cmd_raw, on_ee_cmd, undecodable)
+NDP_TYPED_HANDLER(nudge_task_t, on_task_raw, on_task, undecodable)
+NDP_TYPED_HANDLER(nudge_params_t, on_params_raw, on_params, undecodable)
+
 /* ---------------------------------------------------------------------------------- */
 
 /* 1 if a plan may start now: mocap and robot state fresh, and the setpoint not known to
@@ -522,11 +536,11 @@ int main(int argc, char **argv) {
   nds_model pm;
   memset(&pm, 0, sizeof(pm));
   nd_pool *pool = NULL;
-  nudge_mocap_t_subscription_t *s_mocap = NULL;
-  nudge_robot_state_t_subscription_t *s_rs = NULL;
-  nudge_ee_cmd_t_subscription_t *s_cmd = NULL;
-  nudge_task_t_subscription_t *s_task = NULL;
-  nudge_params_t_subscription_t *s_par = NULL;
+  lcm_subscription_t *s_mocap = NULL;
+  lcm_subscription_t *s_rs = NULL;
+  lcm_subscription_t *s_cmd = NULL;
+  lcm_subscription_t *s_task = NULL;
+  lcm_subscription_t *s_par = NULL;
   lcm_subscription_t *s_epi = NULL;
   proc p;
   memset(&p, 0, sizeof(p));
@@ -558,16 +572,16 @@ int main(int argc, char **argv) {
    * input keep the newest; a longer stall is detected (input_drained). */
   p.in_mocap.cap = 128;
   p.in_rs.cap = p.in_cmd.cap = 500;
-  s_mocap = nudge_mocap_t_subscribe(p.lcm, NDP_CH_MOCAP, on_mocap, &p);
-  s_rs = nudge_robot_state_t_subscribe(p.lcm, NDP_CH_ROBOT_STATE, on_robot_state, &p);
-  s_cmd = nudge_ee_cmd_t_subscribe(p.lcm, NDP_CH_EE_CMD, on_ee_cmd, &p);
-  s_task = nudge_task_t_subscribe(p.lcm, NDP_CH_TASK, on_task, &p);
-  s_par = nudge_params_t_subscribe(p.lcm, NDP_CH_PARAMS, on_params, &p);
+  s_mocap = lcm_subscribe(p.lcm, NDP_CH_MOCAP, on_mocap_raw, &p);
+  s_rs = lcm_subscribe(p.lcm, NDP_CH_ROBOT_STATE, on_robot_state_raw, &p);
+  s_cmd = lcm_subscribe(p.lcm, NDP_CH_EE_CMD, on_ee_cmd_raw, &p);
+  s_task = lcm_subscribe(p.lcm, NDP_CH_TASK, on_task_raw, &p);
+  s_par = lcm_subscribe(p.lcm, NDP_CH_PARAMS, on_params_raw, &p);
   s_epi = lcm_subscribe(p.lcm, NDP_CH_EPISODE, on_episode, &p);
   if (!s_mocap || !s_rs || !s_cmd || !s_task || !s_par || !s_epi ||
-      nudge_mocap_t_subscription_set_queue_capacity(s_mocap, p.in_mocap.cap) ||
-      nudge_robot_state_t_subscription_set_queue_capacity(s_rs, p.in_rs.cap) ||
-      nudge_ee_cmd_t_subscription_set_queue_capacity(s_cmd, p.in_cmd.cap)) {
+      lcm_subscription_set_queue_capacity(s_mocap, p.in_mocap.cap) ||
+      lcm_subscription_set_queue_capacity(s_rs, p.in_rs.cap) ||
+      lcm_subscription_set_queue_capacity(s_cmd, p.in_cmd.cap)) {
     snprintf(err, sizeof(err), "subscribing to the input channels failed");
     goto done;
   }
@@ -624,11 +638,11 @@ int main(int argc, char **argv) {
 done:
   if (status) fprintf(stderr, PROG ": %s\n", err);
   if (p.lcm) {
-    if (s_mocap) nudge_mocap_t_unsubscribe(p.lcm, s_mocap);
-    if (s_rs) nudge_robot_state_t_unsubscribe(p.lcm, s_rs);
-    if (s_cmd) nudge_ee_cmd_t_unsubscribe(p.lcm, s_cmd);
-    if (s_task) nudge_task_t_unsubscribe(p.lcm, s_task);
-    if (s_par) nudge_params_t_unsubscribe(p.lcm, s_par);
+    if (s_mocap) lcm_unsubscribe(p.lcm, s_mocap);
+    if (s_rs) lcm_unsubscribe(p.lcm, s_rs);
+    if (s_cmd) lcm_unsubscribe(p.lcm, s_cmd);
+    if (s_task) lcm_unsubscribe(p.lcm, s_task);
+    if (s_par) lcm_unsubscribe(p.lcm, s_par);
     if (s_epi) lcm_unsubscribe(p.lcm, s_epi);
     lcm_destroy(p.lcm);
   }

@@ -460,6 +460,16 @@ static void on_params(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_pa
   io->rec->params_n = m->buffer_size;
 }
 
+/* Bytes on a typed channel that are not one message of its type. */
+static void undecodable(void *user, const char *ch, const char *why) {
+  refuse(user, ch, why);
+}
+
+NDP_TYPED_HANDLER(nudge_mocap_t, on_mocap_raw, on_mocap, undecodable)
+NDP_TYPED_HANDLER(nudge_robot_state_t, on_robot_state_raw, on_robot_state, undecodable)
+NDP_TYPED_HANDLER(nudge_ee_cmd_t, on_ee_cmd_raw, on_ee_cmd, undecodable)
+NDP_TYPED_HANDLER(nudge_params_t, on_params_raw, on_params, undecodable)
+
 static double yaw_error(double yaw, double goal_yaw) {
   double e = fabs(nd_wrap_angle(yaw - goal_yaw));
   return e > 0.5 * ND_PI ? ND_PI - e : e;
@@ -784,20 +794,20 @@ int main(int argc, char **argv) {
   static tasks_io io;
   ndp_status_init(&io.st, PROG);
   io.st.state = "waiting";
-  nudge_mocap_t_subscription_t *sub = nudge_mocap_t_subscribe(lcm, NDP_CH_MOCAP, on_mocap, &io);
-  nudge_robot_state_t_subscription_t *sub_rs = NULL;
-  nudge_ee_cmd_t_subscription_t *sub_cmd = NULL;
-  nudge_params_t_subscription_t *sub_par = NULL;
+  lcm_subscription_t *sub = lcm_subscribe(lcm, NDP_CH_MOCAP, on_mocap_raw, &io);
+  lcm_subscription_t *sub_rs = NULL;
+  lcm_subscription_t *sub_cmd = NULL;
+  lcm_subscription_t *sub_par = NULL;
   if (cfg.record) {
     io.rec = &rec;
-    sub_rs = nudge_robot_state_t_subscribe(lcm, NDP_CH_ROBOT_STATE, on_robot_state, &io);
-    sub_cmd = nudge_ee_cmd_t_subscribe(lcm, NDP_CH_EE_CMD, on_ee_cmd, &io);
-    sub_par = nudge_params_t_subscribe(lcm, NDP_CH_PARAMS, on_params, &io);
+    sub_rs = lcm_subscribe(lcm, NDP_CH_ROBOT_STATE, on_robot_state_raw, &io);
+    sub_cmd = lcm_subscribe(lcm, NDP_CH_EE_CMD, on_ee_cmd_raw, &io);
+    sub_par = lcm_subscribe(lcm, NDP_CH_PARAMS, on_params_raw, &io);
     /* The runner handles input every 20 ms and appends (one fdatasync) between tasks: a
      * default queue of 30 would drop 1 kHz messages (the newest, as seq gaps). */
     if (!sub_rs || !sub_cmd || !sub_par ||
-        nudge_robot_state_t_subscription_set_queue_capacity(sub_rs, RATE_QUEUE) ||
-        nudge_ee_cmd_t_subscription_set_queue_capacity(sub_cmd, RATE_QUEUE)) {
+        lcm_subscription_set_queue_capacity(sub_rs, RATE_QUEUE) ||
+        lcm_subscription_set_queue_capacity(sub_cmd, RATE_QUEUE)) {
       fprintf(stderr, PROG ": subscribing to ROBOT_STATE, EE_CMD, PARAMS failed\n");
       lcm_destroy(lcm);
       rec_free(&rec);
@@ -899,10 +909,10 @@ int main(int argc, char **argv) {
   }
 done:
   if (status == 1 && ndp_quit) status = 128 + ndp_quit;
-  nudge_mocap_t_unsubscribe(lcm, sub);
-  if (sub_rs) nudge_robot_state_t_unsubscribe(lcm, sub_rs);
-  if (sub_cmd) nudge_ee_cmd_t_unsubscribe(lcm, sub_cmd);
-  if (sub_par) nudge_params_t_unsubscribe(lcm, sub_par);
+  lcm_unsubscribe(lcm, sub);
+  if (sub_rs) lcm_unsubscribe(lcm, sub_rs);
+  if (sub_cmd) lcm_unsubscribe(lcm, sub_cmd);
+  if (sub_par) lcm_unsubscribe(lcm, sub_par);
   lcm_destroy(lcm);
   if (cfg.record) rec_free(&rec);
   return status;

@@ -11,8 +11,9 @@
 # PLAN, TASK, EPISODE, then STATUS with nudge-status listening; heartbeats whose name
 # carries terminal escapes or is over-long must not reach its output): 'bad' messages that
 # decode but carry NaN, inf or out-of-range values, and garbage that does not decode. For
-# each channel, every process subscribed to it must count each bad message in its STATUS
-# `rejected` (heartbeat before vs first heartbeat after the burst). Afterwards: no process
+# each channel, every process subscribed to it must count each message of both kinds in
+# its STATUS `rejected` (heartbeat before vs first heartbeat after the burst), and no log
+# may have lcm-gen's line per undecodable message. Afterwards: no process
 # died or was restarted (supervisor.log, pids), the task runner, running through the
 # injections, finished with at least one goal reached (see test_system for why one) and
 # recorded all three tasks. Then, with no task active, a PLAN and an EE_CMD valid in
@@ -79,11 +80,15 @@ for ch in "${CHANNELS[@]}"; do
     pt_val r1 status "$LOG" "$name" --after-utime $((b + 200000)) rejected
     d=$(( ${r1:-0} - ${r0:-0} ))
     pt_figure "rejected_${ch}_${name#nudge-}" "$d" count
-    pt_check "$ch: $name counted each of the ${nbad:-?} bad messages (rejected +$d)" \
-      test -n "$r0" -a -n "$r1" -a "$d" -ge "${nbad:-1}"
+    pt_check "$ch: $name counted each of the ${nbad:-?} bad and ${ngar:-?} undecodable messages (rejected +$d)" \
+      test -n "$r0" -a -n "$r1" -a "$d" -ge $(( ${nbad:-1} + ${ngar:-1} ))
   done
 done
 t_last=$(pt_now_us)
+# Undecodable input is refused through the rate-limited log, not lcm-gen's wrapper, which
+# printed a line for each message.
+pt_check_not "no process log has lcm-gen's per-message 'error ... decoding' line" \
+  grep -q 'decoding nudge_' "$RUN"/*.log
 
 # STATUS garbage while nudge-status listens: it must not crash and go on printing.
 pt_spawn st "$PT_BIN/nudge-status" --timeout 3 >"$PT_WORK/status.out" 2>"$PT_WORK/status.err"
