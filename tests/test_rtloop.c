@@ -542,6 +542,15 @@ static void test_cycle_allocates_nothing(void **state) {
   assert_true(st.peak_a > 0.5);  /* the far plans drive it near its limits */
 }
 
+/* The next EE_CMD the loop left in the ring (other messages skipped): 1, or 0 when none. */
+static int pop_ee_cmd(nudge_ee_cmd_t *m) {
+  unsigned char buf[ND_RTIO_MAX];
+  int tag, len;
+  while ((len = nd_ring_pop(&g_io.ring, &tag, buf, sizeof buf)) >= 0)
+    if (tag == NDP_EXECLOOP_TAG_EE_CMD && nudge_ee_cmd_t_decode(buf, 0, len, m) == len) return 1;
+  return 0;
+}
+
 /* After a planner restart the robot is at rest and the new planner, finding nothing
  * better, re-sends one plan at 20 Hz: a keypoint 25 mm ahead to be passed at 0.25 m/s,
  * its segment 0.25 s (0.3 s shortened by the 50 ms its state had aged). Restarting the
@@ -595,12 +604,8 @@ static void test_resent_plan_after_restart(void **state) {
       last_id = pl.plan_id;
     }
     ndp_execloop_cycle(&g_loop, now, utime);
-    unsigned char buf[ND_RTIO_MAX];
-    int tag, len;
-    while ((len = nd_ring_pop(&g_io.ring, &tag, buf, sizeof buf)) >= 0) {
-      nudge_ee_cmd_t m;
-      if (tag != NDP_EXECLOOP_TAG_EE_CMD || nudge_ee_cmd_t_decode(buf, 0, len, &m) != len)
-        continue;
+    nudge_ee_cmd_t m;
+    while (pop_ee_cmd(&m)) {
       p[0] = m.p[0], p[1] = m.p[1];
       if (k < BACK) continue;
       if (m.mode == ND_EXEC_TRACK) resumed_tracking++;
@@ -692,12 +697,8 @@ static void test_workspace_plans(void **state) {
       p_in[0] = p[0], p_in[1] = p[1];
     }
     ndp_execloop_cycle(&g_loop, now, utime);
-    unsigned char buf[ND_RTIO_MAX];
-    int tag, len;
-    while ((len = nd_ring_pop(&g_io.ring, &tag, buf, sizeof buf)) >= 0) {
-      nudge_ee_cmd_t m;
-      if (tag != NDP_EXECLOOP_TAG_EE_CMD || nudge_ee_cmd_t_decode(buf, 0, len, &m) != len)
-        continue;
+    nudge_ee_cmd_t m;
+    while (pop_ee_cmd(&m)) {
       p[0] = m.p[0], p[1] = m.p[1];
       if (k < IN) {
         x_max_out = fmax(x_max_out, m.p[0]);
