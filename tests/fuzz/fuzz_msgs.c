@@ -1,7 +1,7 @@
 /* Fuzz target: every message a process accepts from the network, as bytes off the wire.
  *
  * Each input is offered to the decoder of every nudge type (the fingerprint picks at most
- * one), the way the processes decode: the lcm-gen decoder for the fixed-size types, the
+ * one), the way the processes decode: NDP_TYPED_HANDLER for the fixed-size types, the
  * string-checking ndp_decode_episode / ndp_decode_status for the two types with strings
  * (lcm-gen 1.3.1's own decoders for those trust the length words; see ndp_validate.h).
  * A decoded message must re-encode to the bytes it came from and go through its
@@ -13,6 +13,7 @@
 #include <string.h>
 
 #include "fuzz.h"
+#include "ndp.h"
 #include "ndp_history.h"
 #include "ndp_validate.h"
 
@@ -74,23 +75,38 @@ static void fz_valid_params(const nudge_params_t *m) {
              isfinite(m->theta_std[i]) && m->theta_std[i] >= 0, "accepted theta[%d]", i);
 }
 
-/* Decode as type T; if it decodes: exact re-encoding, validator, its promise, cleanup. */
+/* Bytes the processes' handler refused: it must say why. */
+static void fz_bad(void *user, const char *ch, const char *why) {
+  (void)user;
+  (void)ch;
+  FZ_CHECK(why[0] != 0, "refused without a reason");
+}
+
+/* Type T through the processes' own decoding (NDP_TYPED_HANDLER): if it decodes, the
+ * message is all the bytes and re-encodes to them; then its validator and its promise. */
 #define FZ_FIXED(T)                                                                       \
-  static void fz_##T(const uint8_t *d, int len) {                                         \
-    nudge_##T##_t m;                                                                      \
-    const int k = nudge_##T##_t_decode(d, 0, len, &m);                                    \
-    if (k < 0) return;                                                                    \
-    FZ_CHECK(k <= len && k == nudge_##T##_t_encoded_size(&m), #T ": decoded %d of %d", k, \
-             len);                                                                        \
+  static void fz_got_##T(const lcm_recv_buf_t *rb, const char *ch, const nudge_##T##_t *m, \
+                         void *user) {                                                    \
+    (void)ch;                                                                             \
+    (void)user;                                                                           \
+    const int k = nudge_##T##_t_encoded_size(m);                                          \
+    FZ_CHECK(k == (int)rb->data_size, #T ": decoded %d of %d", k, (int)rb->data_size);    \
     uint8_t out[FZ_MAX_ENC];                                                              \
-    FZ_CHECK(nudge_##T##_t_encode(out, 0, sizeof out, &m) == k &&                         \
-             memcmp(out, d, (size_t)k) == 0, #T ": re-encodes differently");              \
+    FZ_CHECK(nudge_##T##_t_encode(out, 0, sizeof out, m) == k &&                          \
+             memcmp(out, rb->data, (size_t)k) == 0, #T ": re-encodes differently");       \
     char why[256] = "";                                                                   \
-    if (ndp_check_##T(&m, why, sizeof why) == 0)                                          \
-      fz_valid_##T(&m);                                                                   \
+    if (ndp_check_##T(m, why, sizeof why) == 0)                                           \
+      fz_valid_##T(m);                                                                    \
     else                                                                                  \
       FZ_CHECK(why[0] != 0, #T ": refused without a reason");                             \
-    nudge_##T##_t_decode_cleanup(&m);                                                     \
+  }                                                                                       \
+  NDP_TYPED_HANDLER(nudge_##T##_t, fz_raw_##T, fz_got_##T, fz_bad)                        \
+  static void fz_##T(const uint8_t *d, int len) {                                         \
+    lcm_recv_buf_t rb;                                                                    \
+    memset(&rb, 0, sizeof rb);                                                            \
+    rb.data = (void *)d;                                                                  \
+    rb.data_size = (uint32_t)len;                                                         \
+    fz_raw_##T(&rb, "FUZZ", NULL);                                                        \
   }
 
 FZ_FIXED(mocap)
