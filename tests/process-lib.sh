@@ -233,9 +233,21 @@ pt_none_left() {
     ps -o pid,ppid,stat,args -p "$(IFS=,; echo "${alive[*]}")" || true
   fi
   # The namespace holds netns-run (pid 1), this script and what the test started:
-  # anything else alive now was left behind. /proc is read without forking, so no child
-  # of this shell is in the list.
-  local d q st args left=()
+  # anything else alive now was left behind.
+  pt_ns_others
+  if ((${#PT_OTHERS[@]} == 0)); then
+    pt_ok "no other process is running in the namespace"
+  else
+    pt_fail "processes still running in the namespace: ${PT_OTHERS[*]}"
+  fi
+}
+
+# pt_ns_others: the live processes of the namespace other than netns-run (pid 1) and this
+# script, as "pid:args", into the array PT_OTHERS. /proc is read without forking, so the
+# scan itself adds no child of this shell to the list.
+pt_ns_others() {
+  local d q st args
+  PT_OTHERS=()
   for d in /proc/[0-9]*; do
     q=${d#/proc/}
     ((q == 1 || q == $$)) && continue
@@ -245,13 +257,8 @@ pt_none_left() {
     [[ ${st%% *} == Z ]] && continue
     args=()
     mapfile -d '' -t args <"$d/cmdline" 2>/dev/null
-    left+=("$q:${args[*]:-?}")
+    PT_OTHERS+=("$q:${args[*]:-?}")
   done
-  if ((${#left[@]} == 0)); then
-    pt_ok "no other process is running in the namespace"
-  else
-    pt_fail "processes still running in the namespace: ${left[*]}"
-  fi
 }
 
 # pt_lc ARGS...: run nudge-logcheck, echo its figures, keep them in $PT_WORK/figures.

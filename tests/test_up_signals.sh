@@ -125,23 +125,6 @@ trapped() {
 # The pid of nudge-NAME as logged in DIR ("nudge-NAME up (pid N)").
 logged_pid() { sed -n -E "s/.*nudge-$2 up \\(pid ([0-9]+)\\).*/\\1/p" "$1/supervisor.log" | tail -n 1; }
 
-# Processes of the namespace other than netns-run (1) and this script, as "pid:args".
-others() {
-  local d q st args
-  OTHERS=()
-  for d in /proc/[0-9]*; do
-    q=${d#/proc/}
-    ((q == 1 || q == $$)) && continue
-    st=""
-    read -r st <"$d/stat" 2>/dev/null || continue
-    st=${st##*) }
-    [[ ${st%% *} == Z ]] && continue
-    args=()
-    mapfile -d '' -t args <"$d/cmdline" 2>/dev/null
-    OTHERS+=("$q:${args[*]:-?}")
-  done
-}
-
 declare -A LAT=()   # kind -> latencies in ms, space-separated
 FAILED_TRIALS=0
 TRIALS=0
@@ -218,11 +201,11 @@ trial() {
   [[ $kind == stubborn ]] && ! log_has "$dir" 'nudge-adapter still running' &&
     { ok=0; why+=" the stubborn adapter was not SIGKILLed;"; }
   # Nothing left: a leftover dies here, so that the next trial starts clean.
-  others
-  if ((${#OTHERS[@]})); then
-    ok=0; why+=" left running: ${OTHERS[*]};"
+  pt_ns_others
+  if ((${#PT_OTHERS[@]})); then
+    ok=0; why+=" left running: ${PT_OTHERS[*]};"
     local o
-    for o in "${OTHERS[@]}"; do kill -KILL "${o%%:*}" 2>/dev/null; done
+    for o in "${PT_OTHERS[@]}"; do kill -KILL "${o%%:*}" 2>/dev/null; done
   fi
   if ((!ok)); then
     FAILED_TRIALS=$((FAILED_TRIALS + 1))
