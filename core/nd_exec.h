@@ -46,8 +46,8 @@ typedef struct {
                         * beyond keypoints (a segment's overshoot, a brake's travel) */
 } nd_exec_cfg;
 
-/* The default workspace: the planner's keypoint box (sim/nds_planner.c), and the room
- * its trajectories need beyond it (nd_exec.c says how much that is). */
+/* The default workspace, also the planner's default keypoint box (nds_planner_cfg), and
+ * the room its trajectories need beyond it (nd_exec.c says how much that is). */
 #define ND_EXEC_WS_LO (-0.5)
 #define ND_EXEC_WS_HI 0.5
 #define ND_EXEC_WS_MARGIN 0.04

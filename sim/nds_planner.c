@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "nd_exec.h"
 #include "nd_math.h"
 
 struct nds_planner {
@@ -40,8 +41,8 @@ void nds_planner_cfg_default(nds_planner_cfg *cfg) {
   cfg->std_init[0] = cfg->std_init[1] = 0.08;
   cfg->std_init[2] = cfg->std_init[3] = 0.25;
   cfg->std_min = 1e-3;
-  cfg->ws_lo[0] = cfg->ws_lo[1] = -0.5;
-  cfg->ws_hi[0] = cfg->ws_hi[1] = 0.5;
+  cfg->ws_lo[0] = cfg->ws_lo[1] = ND_EXEC_WS_LO;  /* the executor's box: one default */
+  cfg->ws_hi[0] = cfg->ws_hi[1] = ND_EXEC_WS_HI;
   cfg->key_v_max = 1.0;
   /* Panda Cartesian limits (NOTES.md) with margin, so the executor never has to clip. */
   cfg->v_max = 1.5;

@@ -542,6 +542,12 @@ static void test_cycle_allocates_nothing(void **state) {
   assert_true(st.peak_a > 0.5);  /* the far plans drive it near its limits */
 }
 
+/* The robot state as the loop's input: the sphere at p, received 0.2 ms before now. */
+static void post_state(double now, const double p[2]) {
+  ndp_execloop_state_in in = {now - 2e-4, {p[0], p[1], 0.025}};
+  nd_mailbox_post(&g_io.state, &in, (int)sizeof in);
+}
+
 /* The next EE_CMD the loop left in the ring (other messages skipped): 1, or 0 when none. */
 static int pop_ee_cmd(nudge_ee_cmd_t *m) {
   unsigned char buf[ND_RTIO_MAX];
@@ -574,8 +580,7 @@ static void test_resent_plan_after_restart(void **state) {
   for (long k = 0; k < END; k++) {
     const double now = T0 + DT * (double)k;
     const int64_t utime = U0 + 1000 * k;
-    ndp_execloop_state_in in = {now - 2e-4, {p[0], p[1], 0.025}};
-    nd_mailbox_post(&g_io.state, &in, (int)sizeof in);
+    post_state(now, p);
     ndp_execloop_plan_in pl;
     pl.t_arrive = now - 2e-4;
     pl.utime = utime - 200;
@@ -663,8 +668,7 @@ static void test_workspace_plans(void **state) {
   for (long k = 0; k < END; k++) {
     const double now = T0 + DT * (double)k;
     const int64_t utime = U0 + 1000 * k;
-    ndp_execloop_state_in in = {now - 2e-4, {p[0], p[1], 0.025}};
-    nd_mailbox_post(&g_io.state, &in, (int)sizeof in);
+    post_state(now, p);
     if (k % 50 == 0) {
       ndp_execloop_plan_in pl;
       memset(&pl, 0, sizeof pl);
