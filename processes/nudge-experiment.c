@@ -62,6 +62,7 @@ static const char *pname[NFIT] = {"slide", "torsion", "roll"};
 typedef struct {
   int runs, episodes, threads, pop, iters, neval, mode, force, quick, landscape;
   double tau, plan_dt, window;
+  double step_std, rel_floor;  /* the fit's (nds_fit_cfg) */
   uint64_t seed;
   double D[MAX_D];
   int nD;
@@ -133,6 +134,10 @@ static void usage(FILE *f) {
 "  --replay MODE    refit replay: force (default) or setpoint (see below)\n"
 "  --window S       refit replay re-anchored on the observations every S s (default\n"
 "                   0.1; 0: one shot from the initial state, the paper's; nds_replay.h)\n"
+"  --step-std K     refit CEM: the std at least K times the mean's last step (default\n"
+"                   2; 0: the paper's plain CEM; nds_fit.c)\n"
+"  --rel-floor R    refit CEM: each refit starts with std >= R |mean|, 0..0.99\n"
+"                   (default 0.05; 0: off)\n"
 "  --plan-dt S      planning model timestep, s (default 0.005; world and refit: 0.001)\n"
 "  --quick          a preset for a first look, under 10 min on 2 cores: --runs 3\n"
 "                   --episodes 4 --pop 32 --iters 2 --tau 3 (explicit options win)\n"
@@ -214,6 +219,8 @@ static int parse_args(int argc, char **argv, opts *o) {
     nds_fit_cfg_default(&fd);
     o->mode = fd.replay.mode;
     o->window = fd.replay.window;
+    o->step_std = fd.step_std;
+    o->rel_floor = fd.rel_floor;
   }
   o->D[0] = 0.2, o->D[1] = 1.0, o->nD = 2;
   for (int i = 1; i < argc; i++) {
@@ -227,7 +234,8 @@ static int parse_args(int argc, char **argv, opts *o) {
     if (!strcmp(a, "--landscape")) { o->landscape = 1; continue; }
     static const char *const with_value[] = {
         "--out", "--runs", "--episodes", "--seed", "--threads", "--pop",
-        "--iters", "--tau", "--eval-tasks", "--plan-dt", "--d", "--replay", "--window"};
+        "--iters", "--tau", "--eval-tasks", "--plan-dt", "--d", "--replay", "--window",
+        "--step-std", "--rel-floor"};
     int known = 0;
     for (size_t k = 0; k < sizeof(with_value) / sizeof(with_value[0]); k++)
       known |= !strcmp(a, with_value[k]);
@@ -250,6 +258,8 @@ static int parse_args(int argc, char **argv, opts *o) {
     else if (!strcmp(a, "--plan-dt")) rc = nd_parse_double(v, a, 1e-3, 0.02, &o->plan_dt, err, sizeof(err));
     else if (!strcmp(a, "--d")) rc = parse_dlist(v, o, err, sizeof(err));
     else if (!strcmp(a, "--window")) rc = nd_parse_double(v, a, 0, 600, &o->window, err, sizeof(err));
+    else if (!strcmp(a, "--step-std")) rc = nd_parse_double(v, a, 0, 100, &o->step_std, err, sizeof(err));
+    else if (!strcmp(a, "--rel-floor")) rc = nd_parse_double(v, a, 0, 0.99, &o->rel_floor, err, sizeof(err));
     else if (!strcmp(a, "--replay")) {
       rc = 0;
       if (!strcmp(v, "setpoint")) o->mode = NDS_REPLAY_SETPOINT;
@@ -742,6 +752,8 @@ static int run_one(study *s, int di, int run, ep_row *rows, char *err, int errle
   nds_fit_cfg_default(&fc);
   fc.replay.mode = o->mode;
   fc.replay.window = o->window;
+  fc.step_std = o->step_std;
+  fc.rel_floor = o->rel_floor;
   /* Seeds from D's value, not its place in --d: "--d 1" repeats the D = 1 runs of the
    * default "--d 0.2,1.0" exactly. */
   uint64_t dkey;
@@ -832,10 +844,11 @@ static void write_config(const opts *o, int argc, char **argv) {
   fprintf(f, "\nruns %d\nepisodes %d\nD", o->runs, o->episodes);
   for (int i = 0; i < o->nD; i++) fprintf(f, " %g", o->D[i]);
   fprintf(f, "\nseed %llu\nplanner N %d C %d, plan dt %g s\ntau %g s\neval tasks %d\n"
-             "refit Q 32 C 2, replay %s, window %g s, world and refit dt 0.001 s\n"
+             "refit Q 32 C 2, replay %s, window %g s, step_std %g, rel_floor %g, world and "
+             "refit dt 0.001 s\n"
              "threads %d\n",
           (unsigned long long)o->seed, o->pop, o->iters, o->plan_dt, o->tau, o->neval,
-          nds_replay_mode_name(o->mode), o->window, o->threads);
+          nds_replay_mode_name(o->mode), o->window, o->step_std, o->rel_floor, o->threads);
   fclose(f);
 }
 

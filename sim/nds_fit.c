@@ -39,10 +39,11 @@
  * 4.3%). At D = 0.2 (6 runs, 3 episodes) rel_floor 0.05 matters: without it three runs
  * froze at 12-19% error (the std at its floor of 0.6% of theta samples only the loss's
  * roughness, below), with it the worst is 3.4% (step_std 2).
- * Re-checked after the executor's fix shortened the training pushes (--quick --runs 10
- * --episodes 2 --d 1, seeds 1 and 2, runs within 5%): these defaults 8 + 8; step_std 3
- * 9 + 6; rel_floor 0.1 10 + 7; window 0.15 s 8 + 8, 0.2 s 6 + 9. Within the seeds'
- * spread, so the defaults stay: the loss has no trend within ~5% of the truth there.
+ * Re-checked after the executor's fix shortened the training pushes (nudge-experiment
+ * --quick --runs 10 --episodes 2 --d 1, seeds 1 and 2, runs within 5%): these defaults
+ * 8 + 8; --step-std 3 9 + 6; --rel-floor 0.1 10 + 7; --window 0.15 8 + 8, 0.2 6 + 9.
+ * Within the seeds' spread, so the defaults stay: the loss has no trend within ~5% of
+ * the truth there (nudge-experiment --landscape).
  *
  * Step size. Plain CEM with C = 2 and rho = 0.2 shrinks the std to ~0.47 of itself per
  * iteration while the optimum lies outside the samples, so from the paper's prior
