@@ -62,7 +62,7 @@ static const char *pname[NFIT] = {"slide", "torsion", "roll"};
 typedef struct {
   int runs, episodes, threads, pop, iters, neval, mode, force, quick, landscape;
   double tau, plan_dt, window;
-  double step_std, rel_floor;  /* the fit's (nds_fit_cfg) */
+  double step_std, rel_floor, k2, robust;  /* the fit's (nds_fit_cfg) */
   uint64_t seed;
   double D[MAX_D];
   int nD;
@@ -138,6 +138,11 @@ static void usage(FILE *f) {
 "                   2; 0: the paper's plain CEM; nds_fit.c)\n"
 "  --rel-floor R    refit CEM: each refit starts with std >= R |mean|, 0..0.99\n"
 "                   (default 0.05; 0: off)\n"
+"  --rot-weight K2  refit loss: weight of the object's yaw term, m^2/rad, 0..1\n"
+"                   (default 0.001; 0: positions only)\n"
+"  --robust S       refit CEM ranks candidates by each window's L through a Cauchy\n"
+"                   loss of scale S, m^2, 0..1 (default 1e-9; 0: by L, the paper's;\n"
+"                   nds_replay.h). Reported losses are L either way\n"
 "  --plan-dt S      planning model timestep, s (default 0.005; world and refit: 0.001)\n"
 "  --quick          a preset for a first look, under 10 min on 2 cores: --runs 3\n"
 "                   --episodes 4 --pop 32 --iters 2 --tau 3 (explicit options win)\n"
@@ -221,6 +226,8 @@ static int parse_args(int argc, char **argv, opts *o) {
     o->window = fd.replay.window;
     o->step_std = fd.step_std;
     o->rel_floor = fd.rel_floor;
+    o->k2 = fd.k2;
+    o->robust = fd.robust;
   }
   o->D[0] = 0.2, o->D[1] = 1.0, o->nD = 2;
   for (int i = 1; i < argc; i++) {
@@ -235,7 +242,7 @@ static int parse_args(int argc, char **argv, opts *o) {
     static const char *const with_value[] = {
         "--out", "--runs", "--episodes", "--seed", "--threads", "--pop",
         "--iters", "--tau", "--eval-tasks", "--plan-dt", "--d", "--replay", "--window",
-        "--step-std", "--rel-floor"};
+        "--step-std", "--rel-floor", "--rot-weight", "--robust"};
     int known = 0;
     for (size_t k = 0; k < sizeof(with_value) / sizeof(with_value[0]); k++)
       known |= !strcmp(a, with_value[k]);
@@ -260,6 +267,8 @@ static int parse_args(int argc, char **argv, opts *o) {
     else if (!strcmp(a, "--window")) rc = nd_parse_double(v, a, 0, 600, &o->window, err, sizeof(err));
     else if (!strcmp(a, "--step-std")) rc = nd_parse_double(v, a, 0, 100, &o->step_std, err, sizeof(err));
     else if (!strcmp(a, "--rel-floor")) rc = nd_parse_double(v, a, 0, 0.99, &o->rel_floor, err, sizeof(err));
+    else if (!strcmp(a, "--rot-weight")) rc = nd_parse_double(v, a, 0, 1, &o->k2, err, sizeof(err));
+    else if (!strcmp(a, "--robust")) rc = nd_parse_double(v, a, 0, 1, &o->robust, err, sizeof(err));
     else if (!strcmp(a, "--replay")) {
       rc = 0;
       if (!strcmp(v, "setpoint")) o->mode = NDS_REPLAY_SETPOINT;
@@ -327,6 +336,18 @@ static int mkdir_p(const char *path, char *err, int errlen) {
 
 static void path_in(char *buf, size_t cap, const char *dir, const char *name) {
   snprintf(buf, cap, "%s/%s", dir, name);
+}
+
+/* The refit's configuration: the fit's defaults with the options' replay and CEM
+ * settings, replaying in mode. */
+static void fit_cfg(const opts *o, int mode, nds_fit_cfg *fc) {
+  nds_fit_cfg_default(fc);
+  fc->replay.mode = mode;
+  fc->replay.window = o->window;
+  fc->step_std = o->step_std;
+  fc->rel_floor = o->rel_floor;
+  fc->k2 = o->k2;
+  fc->robust = o->robust;
 }
 
 /* "%g" of D with the dot kept out of names: 0.2 -> "0.2", 1.0 -> "1". */
@@ -721,9 +742,7 @@ static int record_truth(study *s, const nd_goal *g, int n, uint64_t kind, nd_rol
  * truth's own L, is how low a fitted mean can be expected to score. */
 static int truth_band(study *s, char *err, int errlen) {
   nds_fit_cfg fc;
-  nds_fit_cfg_default(&fc);
-  fc.replay.mode = s->o->mode;
-  fc.replay.window = s->o->window;
+  fit_cfg(s->o, s->o->mode, &fc);
   nds_fit *fit = nds_fit_create(&s->fitm, &fc, s->pool, err, errlen);
   if (!fit) return -1;
   s->band_lo = INFINITY;
@@ -749,11 +768,7 @@ static int run_one(study *s, int di, int run, ep_row *rows, char *err, int errle
   char dn[32], name[96], path[1200];
   dname(D, dn, sizeof(dn));
   nds_fit_cfg fc;
-  nds_fit_cfg_default(&fc);
-  fc.replay.mode = o->mode;
-  fc.replay.window = o->window;
-  fc.step_std = o->step_std;
-  fc.rel_floor = o->rel_floor;
+  fit_cfg(o, o->mode, &fc);
   /* Seeds from D's value, not its place in --d: "--d 1" repeats the D = 1 runs of the
    * default "--d 0.2,1.0" exactly. */
   uint64_t dkey;
@@ -844,11 +859,12 @@ static void write_config(const opts *o, int argc, char **argv) {
   fprintf(f, "\nruns %d\nepisodes %d\nD", o->runs, o->episodes);
   for (int i = 0; i < o->nD; i++) fprintf(f, " %g", o->D[i]);
   fprintf(f, "\nseed %llu\nplanner N %d C %d, plan dt %g s\ntau %g s\neval tasks %d\n"
-             "refit Q 32 C 2, replay %s, window %g s, step_std %g, rel_floor %g, world and "
-             "refit dt 0.001 s\n"
+             "refit Q 32 C 2, replay %s, window %g s, step_std %g, rel_floor %g, "
+             "rot weight %g m^2/rad, robust %g m^2, world and refit dt 0.001 s\n"
              "threads %d\n",
           (unsigned long long)o->seed, o->pop, o->iters, o->plan_dt, o->tau, o->neval,
-          nds_replay_mode_name(o->mode), o->window, o->step_std, o->rel_floor, o->threads);
+          nds_replay_mode_name(o->mode), o->window, o->step_std, o->rel_floor, o->k2, o->robust,
+          o->threads);
   fclose(f);
 }
 
@@ -1071,9 +1087,7 @@ static int landscape_run(const opts *o) {
   const int modes[2] = {NDS_REPLAY_FORCE, NDS_REPLAY_SETPOINT};
   for (int k = 0; k < 2; k++) {
     nds_fit_cfg fc;
-    nds_fit_cfg_default(&fc);
-    fc.replay.mode = modes[k];
-    fc.replay.window = o->window;
+    fit_cfg(o, modes[k], &fc);
     if (!(fits[k] = nds_fit_create(&s.fitm, &fc, s.pool, err, sizeof(err)))) goto done;
   }
   path_in(path, sizeof(path), o->out, "landscape.csv");
@@ -1092,7 +1106,7 @@ static int landscape_run(const opts *o) {
   nds_replay_terms terms[NLAND];
   double x[NG_MAX];
   nds_fit_cfg wcfg;
-  nds_fit_cfg_default(&wcfg);
+  fit_cfg(o, o->mode, &wcfg);
   for (int p = 0; p < NFIT; p++) {
     const int NG = ng[p];
     const int it = (int)lround((1.0 - flo[p]) / (fhi[p] - flo[p]) * (NG - 1));
@@ -1171,9 +1185,7 @@ static int landscape_run(const opts *o) {
       printf("torsion-fit %-8s %-8s", nds_replay_mode_name(modes[k]), land_cname[c]);
       for (int seed = 1; seed <= 3; seed++) {
         nds_fit_cfg fc;
-        nds_fit_cfg_default(&fc);
-        fc.replay.mode = modes[k];
-        fc.replay.window = o->window;
+        fit_cfg(o, modes[k], &fc);
         fc.fit[NDS_TH_SLIDE] = fc.fit[NDS_TH_ROLL] = 0;
         fc.seed = (uint64_t)seed;
         nd_rng rr;

@@ -35,6 +35,9 @@ typedef struct {
   double step_std;             /* nd_cem's step_std (the std follows the mean's steps; 0 off) */
   double rel_floor;            /* each run starts with std >= rel_floor |mean| (0: off) */
   double k1, k2;               /* weights of L_pos,ee (1) and L_rot,o (m^2/rad) */
+  double robust;               /* m^2; > 0: CEM ranks candidates by the windows' robust
+                                  score of this scale (nds_replay_bounded); 0: by L, the
+                                  paper's. Reported losses are L either way */
   int prune;                   /* 1: stop replaying a candidate once it cannot be an elite
                                   (same results, less work: see nds_fit.c); 0: replay all */
   nds_replay_cfg replay;       /* how rollouts are replayed (mode, robot controller) */
@@ -45,7 +48,7 @@ typedef struct {
  * prior at nds_theta_true with the paper's D = 0.2 std; lower 1e-7; k1 = 1,
  * k2 = 1e-3 m^2/rad; prune; seed 1. Beyond the paper (measured in nds_fit.c): step_std 2,
  * std_floor 0.25, rel_floor 0.05, FORCE replay re-anchored every 0.1 s with the default
- * controller. */
+ * controller, candidates ranked by the robust score of scale 1e-9 m^2. */
 void nds_fit_cfg_default(nds_fit_cfg *cfg);
 
 /* Check cfg. Return 0, or -1 naming the bad field. */
@@ -61,11 +64,11 @@ typedef struct {
   double mean[NDS_NTHETA];     /* distribution after the run; held parameters: their value */
   double std[NDS_NTHETA];      /* held parameters: 0 */
   double best[NDS_NTHETA];     /* lowest-loss candidate of the run */
-  double best_loss;
+  double best_loss;            /* its score (L, or the robust score with cfg.robust) */
   double loss_mean;            /* L(mean) on the buffer, evaluated after the last update */
   int diverged_mean;           /* replays of the mean that diverged */
   int iters;
-  double iter_best[NDS_FIT_MAX_ITERS]; /* lowest L of each iteration */
+  double iter_best[NDS_FIT_MAX_ITERS]; /* lowest score of each iteration */
   int replays;                 /* rollout replays started (pruned ones too), the mean's
                                   included; depends on timing when pruning */
   int flat;                    /* 1: every candidate scored the same L (the rollouts say

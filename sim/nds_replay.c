@@ -191,13 +191,14 @@ static void reanchor(const nds_model *nm, mjData *d, const nd_rollout *r, int i)
 }
 
 static void diverge(nds_replay_terms *out) {
-  out->pos_o = out->pos_ee = out->rot_o = NDS_REPLAY_DIVERGED;
+  out->pos_o = out->pos_ee = out->rot_o = out->robust = NDS_REPLAY_DIVERGED;
   out->diverged = 1;
 }
 
-/* The replay; stops once sp + k1 se + k2 sr > bound T (never for bound = INFINITY). */
+/* The replay; stops once sp + k1 se + k2 sr > bound T, or with robust > 0 once the
+ * windows' score passes bound (never for bound = INFINITY). */
 static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
-                  const nd_rollout *r, double k1, double k2, double bound,
+                  const nd_rollout *r, double k1, double k2, double robust, double bound,
                   nds_replay_terms *out, double *pred, char *err, int errlen) {
   memset(out, 0, sizeof(*out)); /* padding too, so terms compare bytewise */
   int k = nds_replay_ratio(nm, r, err, errlen);
@@ -233,14 +234,20 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
   for (int w = 0; w < mjNWARNING; w++) d->warning[w].number = WARN_START;
 
   double sp = 0, se = 0, sr = 0;
-  const double limit = bound * T;
   int cut = 0;
   nds_ctrl pid;
   nds_ctrl_reset(&pid);
   const double mdt = m->opt.timestep;
   /* Model steps per window; 0: never re-anchor. */
   const long W = cfg->window > 0 ? lround(fmax(1, cfg->window / mdt)) : 0;
-  for (; j < T && !diverged && !cut; j++) {
+  /* Windows scored (the whole replay is one when not re-anchoring), the finished windows'
+   * sum of log(1 + e_w / robust) and the running window's weighted error sum. A window's
+   * e_w divides by its full length, known in advance, so a partial window's score only
+   * grows and bounds the final one from below. */
+  const long span = W ? W : T;
+  const long nwin = (T + span - 1) / span;
+  const double limit = robust > 0 ? bound * nwin : bound * T;
+  double rs = 0, ws = 0, score = 0; /* score: rs and the running window's part */  for (; j < T && !diverged && !cut; j++) {
     const int base = j * k;
     if (W && j > 0 && j % W == 0) reanchor(nm, d, r, base - 1);
     const double vel[2] = {d->qvel[dof0], d->qvel[dof1]};
@@ -281,8 +288,19 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
      * [0, pi], taken as the wrapped difference: arccos near 1 loses half the digits
      * (its floor is ~1e-8 rad where the angles agree exactly). */
     sr += fabs(nd_wrap_angle(obj[2] - oo[2]));
-    /* The sums only grow: past the limit the full L is past the bound too. */
-    if (sp + k1 * se + k2 * sr > limit) cut = 1;
+    if (robust > 0) {
+      ws += dx * dx + dy * dy + k1 * (ex * ex + ey * ey) +
+            k2 * fabs(nd_wrap_angle(obj[2] - oo[2]));
+      const long w0 = j / span * span, len = T - w0 < span ? T - w0 : span;
+      const double part = log1p(ws / len / robust);
+      const int closed = j + 1 == w0 + len;
+      if (closed) rs += part, ws = 0;
+      /* The scores only grow: past the limit the full score is past the bound too. */
+      score = rs + (closed ? 0 : part);
+      if (score > limit) cut = 1;
+    } else if (sp + k1 * se + k2 * sr > limit) {
+      cut = 1; /* the sums only grow: past the limit the full L is past the bound too */
+    }
     if (pred) {
       double *row = pred + (size_t)NDS_REPLAY_PRED_COLS * j;
       row[0] = obj[0], row[1] = obj[1], row[2] = obj[2], row[3] = ee[0], row[4] = ee[1];
@@ -300,19 +318,20 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
   out->pos_o = sp / T;
   out->pos_ee = se / T;
   out->rot_o = sr / T;
+  out->robust = robust > 0 ? score / nwin : 0;
   out->cut = cut && j < T;
   return 0;
 }
 
 int nds_replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg, const nd_rollout *r,
                nds_replay_terms *out, double *pred, char *err, int errlen) {
-  return replay(nm, d, cfg, r, 0, 0, INFINITY, out, pred, err, errlen);
+  return replay(nm, d, cfg, r, 0, 0, 0, INFINITY, out, pred, err, errlen);
 }
 
 int nds_replay_bounded(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
-                       const nd_rollout *r, double k1, double k2, double bound,
-                       nds_replay_terms *out, char *err, int errlen) {
-  return replay(nm, d, cfg, r, k1, k2, bound, out, NULL, err, errlen);
+                       const nd_rollout *r, double k1, double k2, double robust,
+                       double bound, nds_replay_terms *out, char *err, int errlen) {
+  return replay(nm, d, cfg, r, k1, k2, robust, bound, out, NULL, err, errlen);
 }
 
 double nds_replay_loss(const nds_replay_terms *t, double k1, double k2) {

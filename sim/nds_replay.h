@@ -73,6 +73,8 @@ typedef struct {
   int diverged;   /* non-finite state or a MuJoCo warning; terms are NDS_REPLAY_DIVERGED */
   int cut;        /* nds_replay_bounded stopped early: terms are the sums so far / T,
                      lower bounds of the full replay's */
+  double robust;  /* nds_replay_bounded with robust > 0: the windows' score (below);
+                     else 0 */
 } nds_replay_terms;
 
 /* Columns of a predicted trajectory row: object x, y, yaw, sphere x, y. */
@@ -100,10 +102,19 @@ int nds_replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg, const 
 
 /* nds_replay without a prediction that gives up as soon as the rollout's L (weights k1,
  * k2) must exceed bound: out->cut = 1 then. bound = INFINITY replays in full, exactly as
- * nds_replay does. For a search that needs only the candidates below some threshold. */
+ * nds_replay does. For a search that needs only the candidates below some threshold.
+ * With robust > 0 (m^2) it also scores the rollout robustly, and bound applies to that:
+ *
+ *   out->robust = 1/N sum_w log(1 + e_w / robust),
+ *   e_w = 1/|w| sum_{t in w} |y_o - y~_o|^2 + k1 |y_ee - y~_ee|^2 + k2 |phi - phi~|
+ *
+ * over the N re-anchoring windows w (the whole replay is one when cfg->window is 0): each
+ * window's L, through the Cauchy loss of scale robust. Why: contacts make a few windows'
+ * errors jump by orders of magnitude for a tiny change of theta (nds_fit.c), and L, a sum
+ * of squares, is then mostly those few windows; the log lets every window count. */
 int nds_replay_bounded(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
-                       const nd_rollout *r, double k1, double k2, double bound,
-                       nds_replay_terms *out, char *err, int errlen);
+                       const nd_rollout *r, double k1, double k2, double robust,
+                       double bound, nds_replay_terms *out, char *err, int errlen);
 
 /* L of one rollout's terms: pos_o + k1 pos_ee + k2 rot_o. */
 double nds_replay_loss(const nds_replay_terms *t, double k1, double k2);

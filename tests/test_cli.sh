@@ -257,6 +257,8 @@ num_cases nudge-experiment --plan-dt 1
 num_cases nudge-experiment --window -1
 num_cases nudge-experiment --step-std -1
 num_cases nudge-experiment --rel-floor 1
+num_cases nudge-experiment --rot-weight 2
+num_cases nudge-experiment --robust 2
 # A good --window is taken (the refusal is the next option's).
 bad nudge-experiment "--runs|out of range" --window 0 --runs 0
 bad nudge-experiment "--d|out of range" --d 0,1

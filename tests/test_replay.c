@@ -4,6 +4,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "nd_math.h"
 #include "nd_snap.h"
 #include "nd_test.h"
 #include "nds_test.h"
@@ -201,6 +202,71 @@ static void test_replay_wrong_theta(void **state) {
   mj_deleteData(d);
   nds_model_free(&nc);
   nds_model_free(&nb);
+}
+
+/* The robust score (nds_replay_bounded with robust > 0) is the mean over the re-anchoring
+ * windows of log(1 + e_w / robust), e_w the window's mean weighted error: recomputed here
+ * from the predicted trajectory. Low at the recording theta; a bound below it cuts the
+ * replay short with a score that is a lower bound. */
+static void test_replay_robust(void **state) {
+  (void)state;
+  const double k1 = 1, k2 = 1e-3, scale = 1e-9;
+  const double th[NDS_NTHETA] = {1.02, 0.005, 1e-4, 1.0};
+  nds_model nm, nb;
+  nds_test_build(&nm, 0.001, NULL);
+  nds_test_build(&nb, 0.001, th);
+  mjData *d = mj_makeData(nm.m);
+  nds_replay_cfg rc;
+  nds_replay_cfg_default(&rc, NDS_REPLAY_FORCE);
+  rc.window = 0.1;
+  char err[256];
+  const nd_rollout *r = &push[1];
+  nds_replay_terms t;
+  assert_int_equal(nds_replay_bounded(&nm, d, &rc, r, k1, k2, scale, INFINITY, &t, err,
+                                      sizeof(err)), 0);
+  /* Re-anchoring keeps the model's own tilt, so the truth is not exact (windows ~1e-10
+   * m^2). */
+  const double at_truth = t.robust;
+  assert_true(at_truth >= 0 && !t.cut);
+
+  double *pred = malloc(sizeof(double) * NDS_REPLAY_PRED_COLS * r->n);
+  assert_int_equal(nds_replay(&nb, d, &rc, r, &t, pred, err, sizeof(err)), 0);
+  assert_true(t.robust == 0);  /* nds_replay does not score robustly */
+  const int W = 100;
+  double want = 0;
+  int nwin = 0;
+  for (int w0 = 0; w0 < r->n; w0 += W, nwin++) {
+    int len = r->n - w0 < W ? r->n - w0 : W;
+    double e = 0;
+    for (int k = w0; k < w0 + len; k++) {
+      const double *p = pred + 5 * k, *o = r->obj + 3 * k, *q = r->ee + 2 * k;
+      e += (p[0] - o[0]) * (p[0] - o[0]) + (p[1] - o[1]) * (p[1] - o[1]) +
+           k1 * ((p[3] - q[0]) * (p[3] - q[0]) + (p[4] - q[1]) * (p[4] - q[1])) +
+           k2 * fabs(nd_wrap_angle(p[2] - o[2]));
+    }
+    want += log1p(e / len / scale);
+  }
+  want /= nwin;
+  free(pred);
+  nds_replay_terms tb;
+  assert_int_equal(nds_replay_bounded(&nb, d, &rc, r, k1, k2, scale, INFINITY, &tb, err,
+                                      sizeof(err)), 0);
+  printf("robust score: truth %.4f, sliding friction +2%%: %.4f over %d windows (L %.3e)\n",
+         at_truth, tb.robust, nwin, nds_replay_loss(&tb, k1, k2));
+  assert_true(nwin == (r->n + W - 1) / W && nwin > 3);
+  assert_true(tb.robust > 1 && tb.robust > 10 * at_truth && !tb.cut);
+  assert_near(tb.robust, want, 1e-9 * want);
+  /* The L terms are those of the plain replay. */
+  assert_true(tb.pos_o == t.pos_o && tb.pos_ee == t.pos_ee && tb.rot_o == t.rot_o);
+
+  nds_replay_terms tc;
+  assert_int_equal(nds_replay_bounded(&nb, d, &rc, r, k1, k2, scale, 0.5 * want, &tc, err,
+                                      sizeof(err)), 0);
+  assert_true(tc.cut);
+  assert_true(tc.robust > 0.5 * want && tc.robust <= want);
+  mj_deleteData(d);
+  nds_model_free(&nb);
+  nds_model_free(&nm);
 }
 
 /* A 2 ms model replays the 1 ms records two steps at a time: n / 2 comparisons, L of the
@@ -497,10 +563,20 @@ static void test_fit_recovers_sliding(void **state) {
   double m[NDS_NTHETA], s[NDS_NTHETA];
   nds_fit_dist(f, m, s);
   assert_memory_equal(m, out.mean, sizeof(m));
-  /* The best candidate's loss is what nds_fit_loss gives it. */
-  double Lb;
-  assert_int_equal(nds_fit_loss(f, out.best, push, NPUSH, &Lb, NULL, err, sizeof(err)), 0);
-  assert_true(Lb == out.best_loss);
+  /* The best candidate's cost is its robust score on the buffer. */
+  nds_model nbest;
+  nds_test_build(&nbest, 0.001, out.best);
+  mjData *db = mj_makeData(nbest.m);
+  double Sb = 0;
+  for (int i = 0; i < NPUSH; i++) {
+    nds_replay_terms t;
+    assert_int_equal(nds_replay_bounded(&nbest, db, &cfg.replay, &push[i], cfg.k1, cfg.k2,
+                                        cfg.robust, INFINITY, &t, err, sizeof(err)), 0);
+    Sb += t.robust;
+  }
+  assert_near(Sb, out.best_loss, 1e-12 * Sb);
+  mj_deleteData(db);
+  nds_model_free(&nbest);
 
   /* Plain CEM (no floor, no step_std) from the same start freezes on the way: its std
    * collapses within the first run, and the mean stops short of the truth. */
@@ -592,6 +668,21 @@ static void test_fit_workers_identical(void **state) {
     assert_memory_equal(&full, &out[1][run], sizeof(full));
   }
   nds_fit_free(f);
+  /* So it does when candidates are ranked by L (robust 0), which prunes on L's sums. */
+  cfg.robust = 0;
+  nds_fit_out byL[2][2];
+  for (int p = 0; p < 2; p++) {
+    cfg.prune = p;
+    f = nds_fit_create(&nm, &cfg, pool, err, sizeof(err));
+    assert_non_null(f);
+    for (int run = 0; run < 2; run++) {
+      assert_int_equal(nds_fit_run(f, rs, 2, &byL[p][run], err, sizeof(err)), 0);
+      byL[p][run].replays = 0;
+    }
+    nds_fit_free(f);
+  }
+  assert_memory_equal(byL[0], byL[1], sizeof(byL[0]));
+  assert_true(byL[1][1].mean[NDS_TH_SLIDE] != out[1][1].mean[NDS_TH_SLIDE]);
   nd_pool_free(pool);
   for (int i = 0; i < 2; i++) rec_free(&rs[i]);
   nds_model_free(&nm);
@@ -786,6 +877,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_replay_exact),
       cmocka_unit_test(test_replay_wrong_theta),
+      cmocka_unit_test(test_replay_robust),
       cmocka_unit_test(test_replay_ratio),
       cmocka_unit_test(test_replay_velocity),
       cmocka_unit_test(test_replay_bad_records),
