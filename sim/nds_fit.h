@@ -48,7 +48,8 @@ typedef struct {
  * prior at nds_theta_true with the paper's D = 0.2 std; lower 1e-7; k1 = 1,
  * k2 = 1e-3 m^2/rad; prune; seed 1. Beyond the paper (measured in nds_fit.c): step_std 2,
  * std_floor 0.25, rel_floor 0.05, FORCE replay re-anchored every 0.1 s with the default
- * controller, candidates ranked by the robust score of scale 1e-9 m^2. */
+ * controller, candidates ranked by L (robust 0; 1e-9 m^2 ranks better but replays more,
+ * nds_fit.c). */
 void nds_fit_cfg_default(nds_fit_cfg *cfg);
 
 /* Check cfg. Return 0, or -1 naming the bad field. */
