@@ -149,7 +149,8 @@ static void usage(FILE *f) {
 "  --landscape      instead of the study: record the 10 training tasks with the true\n"
 "                   theta and write DIR/landscape.csv, the loss along each friction for\n"
 "                   both replay modes (re-anchored as --window says), with a summary\n"
-"                   of each curve\n"
+"                   of each curve, and the robust score (--robust, else 1e-9) beside L\n"
+"                   along sliding friction\n"
 "  -h, --help       this text\n\n"
 "Replay modes: force replays the recorded force on the sphere open loop (the paper's\n"
 "simulation); setpoint replays the recorded setpoints through the robot's tracking\n"
@@ -1059,13 +1060,29 @@ enum { NSCRIPT = 3, NLAND = NTRAIN + NSCRIPT };
 static int land_class(int i) { return i < NTRAIN ? 0 : i == NTRAIN ? 1 : 2; }
 static const char *land_cname[3] = {"planned", "straight", "spin"};
 
+/* Grids in units of the truth, each holding it: sliding 0.5..1.5 in steps of 0.025,
+ * torsional and rolling 0..3 in steps of 0.05 (0 as the fit's lower bound). */
+enum { NG_MAX = 61 };
+static const double land_hi[NFIT] = {1.5, 3.0, 3.0}, land_lo[NFIT] = {0.5, 0.0, 0.0};
+static const int land_ng[NFIT] = {41, 61, 61};
+
+/* The index of the truth in parameter p's landscape grid, and grid point g. */
+static int land_it(int p) {
+  return (int)lround((1.0 - land_lo[p]) / (land_hi[p] - land_lo[p]) * (land_ng[p] - 1));
+}
+static double land_x(int p, int g) {
+  if (g == land_it(p)) return nds_theta_true[p];
+  const double u = land_lo[p] + (land_hi[p] - land_lo[p]) * g / (land_ng[p] - 1);
+  return fmax(1e-7, nds_theta_true[p] * u);
+}
+
 static int landscape_run(const opts *o) {
   char err[512] = "";
   study s;
   int status = 1;
   nd_rollout rs[NLAND] = {{0}};
   int nr = 0;
-  nds_fit *fits[2] = {NULL, NULL};
+  nds_fit *fits[2] = {NULL, NULL}, *rfit = NULL;
   FILE *f = NULL;
   double *Lb = NULL, *per = NULL;
   if (study_init(&s, o, err, sizeof(err))) goto done;
@@ -1090,34 +1107,37 @@ static int landscape_run(const opts *o) {
     fit_cfg(o, modes[k], &fc);
     if (!(fits[k] = nds_fit_create(&s.fitm, &fc, s.pool, err, sizeof(err)))) goto done;
   }
+  {
+    /* The study's robust score (--robust, or nds_fit.h's scale), in the study's mode. */
+    nds_fit_cfg fc;
+    fit_cfg(o, o->mode, &fc);
+    if (!(fc.robust > 0)) fc.robust = NDS_FIT_ROBUST_SCALE;
+    if (!(rfit = nds_fit_create(&s.fitm, &fc, s.pool, err, sizeof(err)))) goto done;
+  }
   path_in(path, sizeof(path), o->out, "landscape.csv");
   if (!(f = fopen(path, "w"))) {
     snprintf(err, sizeof(err), "%.300s: %s", path, strerror(errno));
     goto done;
   }
   fputs("mode,param,value,rollout,class,turn_rad,L,pos_o,pos_ee,rot_o,diverged\n", f);
-  /* Grids in units of the truth, each holding it: sliding 0.5..1.5 in steps of 0.025,
-   * torsional and rolling 0..3 in steps of 0.05 (0 as the fit's lower bound). */
-  enum { NG_MAX = 61 };
-  const double fhi[NFIT] = {1.5, 3.0, 3.0}, flo[NFIT] = {0.5, 0.0, 0.0};
-  const int ng[NFIT] = {41, 61, 61};
-  Lb = malloc(sizeof(double) * NG_MAX * 3);
-  per = malloc(sizeof(double) * NG_MAX);
+  Lb = malloc(sizeof(double) * NG_MAX * 6);   /* L per grid point and class; then S */
+  per = malloc(sizeof(double) * NG_MAX * 2);
+  if (!Lb || !per) {
+    snprintf(err, sizeof(err), "out of memory");
+    goto done;
+  }
   nds_replay_terms terms[NLAND];
   double x[NG_MAX];
   nds_fit_cfg wcfg;
   fit_cfg(o, o->mode, &wcfg);
   for (int p = 0; p < NFIT; p++) {
-    const int NG = ng[p];
-    const int it = (int)lround((1.0 - flo[p]) / (fhi[p] - flo[p]) * (NG - 1));
+    const int NG = land_ng[p], it = land_it(p);
     for (int k = 0; k < 2; k++) {
       /* L of each class of rollouts. */
       for (int g = 0; g < NG; g++) {
         double th[NDS_NTHETA];
         memcpy(th, nds_theta_true, sizeof(th));
-        x[g] = g == it ? nds_theta_true[p]
-                       : fmax(1e-7, nds_theta_true[p] * (flo[p] + (fhi[p] - flo[p]) * g / (NG - 1)));
-        th[p] = x[g];
+        th[p] = x[g] = land_x(p, g);
         double L;
         if (nds_fit_loss(fits[k], th, rs, nr, &L, terms, err, sizeof(err))) goto done;
         Lb[3 * g] = Lb[3 * g + 1] = Lb[3 * g + 2] = 0;
@@ -1137,8 +1157,8 @@ static int landscape_run(const opts *o) {
         curve_shape(x, per, NG, it, &am, &rough, &mono, &nmin);
         /* Depth 20% and 50% either side of the truth (nearest grid points), and the plateau
          * a 0.1% offset already reaches (the chaos floor, below). */
-        int d20 = (int)lround(0.2 / (fhi[p] - flo[p]) * (NG - 1));
-        int d50 = (int)lround(0.5 / (fhi[p] - flo[p]) * (NG - 1));
+        int d20 = (int)lround(0.2 / (land_hi[p] - land_lo[p]) * (NG - 1));
+        int d50 = (int)lround(0.5 / (land_hi[p] - land_lo[p]) * (NG - 1));
         printf("landscape %-8s %-7s %-8s argmin %.4g (truth %.4g), monotone %.2f, roughness "
                "%.2f, local minima %d, L(-50%%) %.2e, L(-20%%) %.2e, L(+20%%) %.2e, "
                "L(+50%%) %.2e\n",
@@ -1146,6 +1166,41 @@ static int landscape_run(const opts *o) {
                mono, rough, nmin, per[it - d50], per[it - d20], per[it + d20], per[it + d50]);
       }
     }
+  }
+  /* The robust score along sliding friction beside L, from the same replays: how each
+   * ranks candidates near the truth (nds_fit.c). Per class: both curves' shape, and both at
+   * -10, -5, -2.5, +2.5, +5 and +10 % of the truth. */
+  {
+    const int p = NDS_TH_SLIDE, NG = land_ng[p], it = land_it(p);
+    double *Sb = Lb + 3 * NG_MAX, *Sper = per + NG_MAX;
+    for (int g = 0; g < NG; g++) {
+      double th[NDS_NTHETA], S;
+      memcpy(th, nds_theta_true, sizeof(th));
+      th[p] = x[g] = land_x(p, g);
+      if (nds_fit_score(rfit, th, rs, nr, &S, terms, err, sizeof(err))) goto done;
+      for (int q = 0; q < 3; q++) Lb[3 * g + q] = Sb[3 * g + q] = 0;
+      for (int i = 0; i < nr; i++) {
+        Lb[3 * g + land_class(i)] += nds_replay_loss(&terms[i], wcfg.k1, wcfg.k2);
+        Sb[3 * g + land_class(i)] += terms[i].robust;
+      }
+    }
+    static const int off[6] = {-4, -2, -1, 1, 2, 4};
+    for (int q = 0; q < 3; q++) {
+      double am[2], rough[2], mono[2];
+      int nmin[2];
+      for (int g = 0; g < NG; g++) per[g] = Lb[3 * g + q], Sper[g] = Sb[3 * g + q];
+      curve_shape(x, per, NG, it, &am[0], &rough[0], &mono[0], &nmin[0]);
+      curve_shape(x, Sper, NG, it, &am[1], &rough[1], &mono[1], &nmin[1]);
+      printf("robust-vs-L %-8s slide %-8s L: argmin %.4g, monotone %.2f, local minima %d; "
+             "S: argmin %.4g, monotone %.2f, local minima %d; -10..+10%%: L",
+             nds_replay_mode_name(o->mode), land_cname[q], am[0], mono[0], nmin[0], am[1],
+             mono[1], nmin[1]);
+      for (int i = 0; i < 6; i++) printf(" %.2e", per[it + off[i]]);
+      printf(", S");
+      for (int i = 0; i < 6; i++) printf(" %.3f", Sper[it + off[i]]);
+      printf("\n");
+    }
+    fflush(stdout);
   }
   /* How fast L leaves 0 around the truth: relative offsets from 1e-9 up. An L that jumps
    * to its plateau at tiny offsets is chaos in the contacts, not information. */
@@ -1220,6 +1275,7 @@ done:
   free(Lb);
   free(per);
   for (int k = 0; k < 2; k++) nds_fit_free(fits[k]);
+  nds_fit_free(rfit);
   for (int i = 0; i < nr; i++) nd_rollout_free(&rs[i]);
   study_free(&s);
   return status;

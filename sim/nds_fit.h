@@ -23,6 +23,10 @@
 
 #define NDS_FIT_MAX_ITERS 16
 
+/* The robust score's scale that the study measured best (nds_fit.c), m^2; not the
+ * default (nds_fit_cfg.robust). */
+#define NDS_FIT_ROBUST_SCALE 1e-9
+
 typedef struct {
   int pop, iters;              /* Q >= 2 candidates, C in [1, NDS_FIT_MAX_ITERS] iterations */
   double elite_frac;           /* rho in (0, 1] */
@@ -102,9 +106,14 @@ void nds_fit_dist(const nds_fit *f, double mean[NDS_NTHETA], double std[NDS_NTHE
 int nds_fit_run(nds_fit *f, const nd_rollout *rs, int n, nds_fit_out *out, char *err,
                 int errlen);
 
-/* L(theta) on rs[0, n) in parallel, as the fit scores a candidate (a validation loss).
- * per, if not NULL, receives each rollout's terms. Return 0, or -1 with a message. */
+/* L(theta) on rs[0, n) in parallel (a validation loss). per, if not NULL, receives each
+ * rollout's terms. Return 0, or -1 with a message. */
 int nds_fit_loss(nds_fit *f, const double theta[NDS_NTHETA], const nd_rollout *rs, int n,
                  double *loss, nds_replay_terms *per, char *err, int errlen);
+
+/* nds_fit_loss, scored as CEM ranks a candidate: the robust score with cfg.robust > 0
+ * (per[i].robust each rollout's), else L. */
+int nds_fit_score(nds_fit *f, const double theta[NDS_NTHETA], const nd_rollout *rs, int n,
+                  double *score, nds_replay_terms *per, char *err, int errlen);
 
 #endif

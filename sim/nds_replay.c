@@ -240,14 +240,17 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
   const double mdt = m->opt.timestep;
   /* Model steps per window; 0: never re-anchor. */
   const long W = cfg->window > 0 ? lround(fmax(1, cfg->window / mdt)) : 0;
-  /* Windows scored (the whole replay is one when not re-anchoring), the finished windows'
-   * sum of log(1 + e_w / robust) and the running window's weighted error sum. A window's
-   * e_w divides by its full length, known in advance, so a partial window's score only
-   * grows and bounds the final one from below. */
+  /* The robust score's windows are the re-anchoring ones (the whole replay is one when not
+   * re-anchoring). rs sums the finished windows' log(1 + e_w / robust), ws the running
+   * window's weighted errors. e_w divides by the window's full length wlen, known in
+   * advance, so ws only grows toward its final value, and ws > wcap (the room left under
+   * the bound) is as final a cut as one on L's sums. */
   const long span = W ? W : T;
   const long nwin = (T + span - 1) / span;
   const double limit = robust > 0 ? bound * nwin : bound * T;
-  double rs = 0, ws = 0, score = 0; /* score: rs and the running window's part */  for (; j < T && !diverged && !cut; j++) {
+  long wlen = span < T ? span : T, wend = wlen;
+  double rs = 0, ws = 0, wcap = robust > 0 ? wlen * robust * expm1(limit) : 0;
+  for (; j < T && !diverged && !cut; j++) {
     const int base = j * k;
     if (W && j > 0 && j % W == 0) reanchor(nm, d, r, base - 1);
     const double vel[2] = {d->qvel[dof0], d->qvel[dof1]};
@@ -282,22 +285,25 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
     const double *oo = r->obj + 3 * (base + k - 1), *oe = r->ee + 2 * (base + k - 1);
     double dx = obj[0] - oo[0], dy = obj[1] - oo[1];
     double ex = ee[0] - oe[0], ey = ee[1] - oe[1];
-    sp += dx * dx + dy * dy;
-    se += ex * ex + ey * ey;
+    const double po = dx * dx + dy * dy, pe = ex * ex + ey * ey;
     /* The angle between the unit vectors v(phi) and v(phi~), i.e. arccos(v^T v~) in
      * [0, pi], taken as the wrapped difference: arccos near 1 loses half the digits
      * (its floor is ~1e-8 rad where the angles agree exactly). */
-    sr += fabs(nd_wrap_angle(obj[2] - oo[2]));
+    const double ro = fabs(nd_wrap_angle(obj[2] - oo[2]));
+    sp += po;
+    se += pe;
+    sr += ro;
     if (robust > 0) {
-      ws += dx * dx + dy * dy + k1 * (ex * ex + ey * ey) +
-            k2 * fabs(nd_wrap_angle(obj[2] - oo[2]));
-      const long w0 = j / span * span, len = T - w0 < span ? T - w0 : span;
-      const double part = log1p(ws / len / robust);
-      const int closed = j + 1 == w0 + len;
-      if (closed) rs += part, ws = 0;
-      /* The scores only grow: past the limit the full score is past the bound too. */
-      score = rs + (closed ? 0 : part);
-      if (score > limit) cut = 1;
+      ws += po + k1 * pe + k2 * ro;
+      if (ws > wcap) {
+        cut = 1; /* with the finished windows, past the bound: so is the full score */
+      } else if (j + 1 == wend) {
+        rs += log1p(ws / wlen / robust);
+        ws = 0;
+        wlen = T - wend < span ? T - wend : span;
+        wend += wlen;
+        wcap = wlen * robust * expm1(limit - rs);
+      }
     } else if (sp + k1 * se + k2 * sr > limit) {
       cut = 1; /* the sums only grow: past the limit the full L is past the bound too */
     }
@@ -318,7 +324,7 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
   out->pos_o = sp / T;
   out->pos_ee = se / T;
   out->rot_o = sr / T;
-  out->robust = robust > 0 ? score / nwin : 0;
+  out->robust = robust > 0 ? (rs + (cut ? log1p(ws / wlen / robust) : 0)) / nwin : 0;
   out->cut = cut && j < T;
   return 0;
 }
