@@ -80,6 +80,7 @@ static int nd_cem_validate(const nd_cem_cfg *cfg, char *err, int errlen) {
   else if (!(cfg->noise_beta >= 0.0 && isfinite(cfg->noise_beta))) bad = "noise_beta must be finite and >= 0";
   else if (!(cfg->std_min >= 0.0 && isfinite(cfg->std_min))) bad = "std_min must be finite and >= 0";
   else if (!(cfg->step_std >= 0.0 && isfinite(cfg->step_std))) bad = "step_std must be finite and >= 0";
+  else if (!(cfg->step_gate >= 0.0 && isfinite(cfg->step_gate))) bad = "step_gate must be finite and >= 0";
   if (bad) {
     nd_cem_err(err, errlen, "nd_cem: %s", bad);
     return -1;
@@ -339,7 +340,8 @@ static void nd_cem_update(nd_cem *cem) {
     double nm = a * cem->mean[i] + (1.0 - a) * m;
     double ns = a * cem->std[i] + (1.0 - a) * s;
     nm = nd_cem_clip(nm, cem->lower, cem->upper, i);
-    if (cfg->step_std * fabs(nm - cem->mean[i]) > ns) ns = cfg->step_std * fabs(nm - cem->mean[i]);
+    double step = fabs(nm - cem->mean[i]);
+    if (step >= cfg->step_gate * cem->std[i] && cfg->step_std * step > ns) ns = cfg->step_std * step;
     cem->mean[i] = nm;
     cem->std[i] = ns > cfg->std_min ? ns : cfg->std_min;
   }

@@ -36,6 +36,10 @@ typedef struct {
                          update, so (for step_std >= 1) it grows while the elites lie on
                          one side (a slope) and shrinks once they straddle the optimum;
                          0: plain CEM */
+  double step_gate;   /* >= 0: the step_std rule applies only to a step of at least step_gate
+                         sampling stds (on a slope the elite mean moves ~1.4 std; a shorter
+                         step means the elites found the optimum inside the samples); 0: any
+                         step */
   const double *lower; /* per-dim bounds (dim values) or NULL for none (each side on its
                           own); samples, mean and shifted elites are clipped */
   const double *upper;

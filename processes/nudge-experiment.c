@@ -62,7 +62,7 @@ static const char *pname[NFIT] = {"slide", "torsion", "roll"};
 typedef struct {
   int runs, episodes, threads, pop, iters, neval, mode, force, quick, landscape;
   double tau, plan_dt, window;
-  double step_std, rel_floor, k2, robust;  /* the fit's (nds_fit_cfg) */
+  double step_std, step_gate, rel_floor, k2, robust;  /* the fit's (nds_fit_cfg) */
   uint64_t seed;
   double D[MAX_D];
   int nD;
@@ -136,6 +136,8 @@ static void usage(FILE *f) {
 "                   0.1; 0: one shot from the initial state, the paper's; nds_replay.h)\n"
 "  --step-std K     refit CEM: the std at least K times the mean's last step (default\n"
 "                   2; 0: the paper's plain CEM; nds_fit.c)\n"
+"  --step-gate G    refit CEM: --step-std only for steps of at least G sampling stds\n"
+"                   (default 0.75; 0: every step; nds_fit.c)\n"
 "  --rel-floor R    refit CEM: each refit starts with std >= R |mean|, 0..0.99\n"
 "                   (default 0.05; 0: off)\n"
 "  --rot-weight K2  refit loss: weight of the object's yaw term, m^2/rad, 0..1\n"
@@ -226,6 +228,7 @@ static int parse_args(int argc, char **argv, opts *o) {
     o->mode = fd.replay.mode;
     o->window = fd.replay.window;
     o->step_std = fd.step_std;
+    o->step_gate = fd.step_gate;
     o->rel_floor = fd.rel_floor;
     o->k2 = fd.k2;
     o->robust = fd.robust;
@@ -243,7 +246,7 @@ static int parse_args(int argc, char **argv, opts *o) {
     static const char *const with_value[] = {
         "--out", "--runs", "--episodes", "--seed", "--threads", "--pop",
         "--iters", "--tau", "--eval-tasks", "--plan-dt", "--d", "--replay", "--window",
-        "--step-std", "--rel-floor", "--rot-weight", "--robust"};
+        "--step-std", "--step-gate", "--rel-floor", "--rot-weight", "--robust"};
     int known = 0;
     for (size_t k = 0; k < sizeof(with_value) / sizeof(with_value[0]); k++)
       known |= !strcmp(a, with_value[k]);
@@ -267,6 +270,7 @@ static int parse_args(int argc, char **argv, opts *o) {
     else if (!strcmp(a, "--d")) rc = parse_dlist(v, o, err, sizeof(err));
     else if (!strcmp(a, "--window")) rc = nd_parse_double(v, a, 0, 600, &o->window, err, sizeof(err));
     else if (!strcmp(a, "--step-std")) rc = nd_parse_double(v, a, 0, 100, &o->step_std, err, sizeof(err));
+    else if (!strcmp(a, "--step-gate")) rc = nd_parse_double(v, a, 0, 100, &o->step_gate, err, sizeof(err));
     else if (!strcmp(a, "--rel-floor")) rc = nd_parse_double(v, a, 0, 0.99, &o->rel_floor, err, sizeof(err));
     else if (!strcmp(a, "--rot-weight")) rc = nd_parse_double(v, a, 0, 1, &o->k2, err, sizeof(err));
     else if (!strcmp(a, "--robust")) rc = nd_parse_double(v, a, 0, 1, &o->robust, err, sizeof(err));
@@ -346,6 +350,7 @@ static void fit_cfg(const opts *o, int mode, nds_fit_cfg *fc) {
   fc->replay.mode = mode;
   fc->replay.window = o->window;
   fc->step_std = o->step_std;
+  fc->step_gate = o->step_gate;
   fc->rel_floor = o->rel_floor;
   fc->k2 = o->k2;
   fc->robust = o->robust;
@@ -860,11 +865,11 @@ static void write_config(const opts *o, int argc, char **argv) {
   fprintf(f, "\nruns %d\nepisodes %d\nD", o->runs, o->episodes);
   for (int i = 0; i < o->nD; i++) fprintf(f, " %g", o->D[i]);
   fprintf(f, "\nseed %llu\nplanner N %d C %d, plan dt %g s\ntau %g s\neval tasks %d\n"
-             "refit Q 32 C 2, replay %s, window %g s, step_std %g, rel_floor %g, "
+             "refit Q 32 C 2, replay %s, window %g s, step_std %g, step_gate %g, rel_floor %g, "
              "rot weight %g m^2/rad, robust %g m^2, world and refit dt 0.001 s\n"
              "threads %d\n",
           (unsigned long long)o->seed, o->pop, o->iters, o->plan_dt, o->tau, o->neval,
-          nds_replay_mode_name(o->mode), o->window, o->step_std, o->rel_floor, o->k2, o->robust,
+          nds_replay_mode_name(o->mode), o->window, o->step_std, o->step_gate, o->rel_floor, o->k2, o->robust,
           o->threads);
   fclose(f);
 }

@@ -4,8 +4,9 @@
  * and summing the rollouts' L = L_pos,o + k1 L_pos,ee + k2 L_rot,o. The optimiser is the
  * project's nd_cem in its plain configuration: white Gaussian noise per parameter, no
  * elites kept, no population decay, no momentum, no injected mean; only a floor on the std
- * (std_floor, rel_floor) and a std that follows the mean's steps (step_std; nds_fit.c). Kept elites would carry costs measured on an older buffer
- * into the next refit, and with C = 2 the extra evaluations buy little.
+ * (std_floor, rel_floor) and a std that follows the mean's long steps (step_std,
+ * step_gate; nds_fit.c). Kept elites would carry costs measured on an older buffer into
+ * the next refit, and with C = 2 the extra evaluations buy little.
  *
  * The distribution persists between runs: create sets it to the prior (mu0, sigma0),
  * each nds_fit_run goes on from where the last ended (the incremental loop's warm start
@@ -37,6 +38,8 @@ typedef struct {
   double std_floor;            /* std never falls below std_floor * sigma0 (0: the paper's
                                   plain CEM, which freezes after a run or two) */
   double step_std;             /* nd_cem's step_std (the std follows the mean's steps; 0 off) */
+  double step_gate;            /* nd_cem's step_gate (step_std only for steps >= this many
+                                  stds; 0: every step) */
   double rel_floor;            /* each run starts with std >= rel_floor |mean| (0: off) */
   double k1, k2;               /* weights of L_pos,ee (1) and L_rot,o (m^2/rad) */
   double robust;               /* m^2; > 0: CEM ranks candidates by the windows' robust
@@ -50,10 +53,10 @@ typedef struct {
 
 /* Paper settings: Q 32, C 2, rho 0.2, fitting the three frictions with the mass held;
  * prior at nds_theta_true with the paper's D = 0.2 std; lower 1e-7; k1 = 1,
- * k2 = 1e-3 m^2/rad; prune; seed 1. Beyond the paper (measured in nds_fit.c): step_std 2,
- * std_floor 0.25, rel_floor 0.05, FORCE replay re-anchored every 0.1 s with the default
- * controller, candidates ranked by L (robust 0; 1e-9 m^2 ranks better but replays more,
- * nds_fit.c). */
+ * k2 = 1e-3 m^2/rad; prune; seed 1. Beyond the paper (measured in nds_fit.c): step_std 2
+ * gated at 0.75 std, std_floor 0.25, rel_floor 0.05, FORCE replay re-anchored every 0.1 s
+ * with the default controller, candidates ranked by L (robust 0; 1e-9 m^2 ranks better
+ * but replays more, nds_fit.c). */
 void nds_fit_cfg_default(nds_fit_cfg *cfg);
 
 /* Check cfg. Return 0, or -1 naming the bad field. */

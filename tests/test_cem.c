@@ -639,6 +639,53 @@ static void test_step_std(void **state) {
   assert_true(s_step < 1e-2);
 }
 
+/* step_gate: an optimum found inside wide samples is a short step in units of the sampling
+ * std, so the std collapses to the elites' spread instead of following the step; along a
+ * slope (steps of ~1.4 std) the gate changes nothing. One iteration on the bowl. */
+static void one_step(double gate, double m0, double s0, double target, double *mean,
+                     double *std) {
+  nd_cem_cfg cfg;
+  nd_cem_cfg_default(&cfg, 1, 1, 32, 1);
+  cfg.elite_frac = 0.2;
+  cfg.step_std = 2;
+  cfg.step_gate = gate;
+  nd_cem *cem = nd_cem_create(&cfg, NULL, 0);
+  assert_non_null(cem);
+  nd_cem_set_dist(cem, &m0, &s0);
+  nd_rng r;
+  nd_rng_seed(&r, 5, 0);
+  assert_int_equal(nd_cem_run(cem, &r, bowl1_cost, (void *)&target), 0);
+  *mean = nd_cem_mean(cem)[0];
+  *std = nd_cem_std(cem)[0];
+  nd_cem_free(cem);
+}
+
+static void test_step_gate(void **state) {
+  (void)state;
+  double m0, s0, m1, s1;
+  /* Optimum 0.4 std away, inside the samples: same mean, the gated std is the elites'. */
+  one_step(0, 0, 10, 4, &m0, &s0);
+  one_step(1, 0, 10, 4, &m1, &s1);
+  printf("inside: mean %.3f, std ungated %.3f, gated %.3f\n", m0, s0, s1);
+  assert_true(m0 == m1);
+  assert_near(m0, 4, 1.5);
+  assert_true(s0 >= 2 * fabs(m0) * (1 - 1e-12));
+  assert_true(s1 < 0.5 * s0 && s1 < 2);
+  /* On a slope (optimum 10 std away) the step passes the gate: the std follows it. */
+  one_step(0, 0, 1, 10, &m0, &s0);
+  one_step(1, 0, 1, 10, &m1, &s1);
+  printf("slope: mean %.3f, std ungated %.3f, gated %.3f\n", m0, s0, s1);
+  assert_true(m0 > 1 && m0 == m1 && s0 == s1);
+  assert_near(s1, 2 * m1, 1e-12);
+  /* A gate below zero is refused. */
+  nd_cem_cfg cfg;
+  nd_cem_cfg_default(&cfg, 1, 1, 32, 1);
+  cfg.step_gate = -1;
+  char err[128] = "";
+  assert_null(nd_cem_create(&cfg, err, sizeof(err)));
+  assert_non_null(strstr(err, "step_gate"));
+}
+
 static void test_update_rule(void **state) {
   (void)state;
   nd_cem_cfg cfg;
@@ -765,6 +812,7 @@ int main(void) {
       cmocka_unit_test(test_elite_selection),
       cmocka_unit_test(test_update_rule),
       cmocka_unit_test(test_step_std),
+      cmocka_unit_test(test_step_gate),
       cmocka_unit_test(test_callback_error),
       cmocka_unit_test(test_invalid_cfg),
   };

@@ -256,6 +256,7 @@ int_cases nudge-experiment --eval-tasks 6
 num_cases nudge-experiment --plan-dt 1
 num_cases nudge-experiment --window -1
 num_cases nudge-experiment --step-std -1
+num_cases nudge-experiment --step-gate -1
 num_cases nudge-experiment --rel-floor 1
 num_cases nudge-experiment --rot-weight 2
 num_cases nudge-experiment --robust 2

@@ -766,6 +766,7 @@ static void test_fit_bad_config(void **state) {
   BAD("k1", c->k1 = NAN);
   BAD("k2", c->k2 = -1e-3);
   BAD("step_std", c->step_std = -1);
+  BAD("step_gate", c->step_gate = NAN);
   BAD("rel_floor", c->rel_floor = 1);
   BAD("replay.window", c->replay.window = NAN);
   BAD("replay.window", c->replay.window = -0.1);
