@@ -100,13 +100,14 @@
  * the ten planned training tasks it is flat within +-7.5% (nudge-experiment --landscape,
  * its robust-vs-L lines set both curves side by side). A/B, runs within 5% after episode
  * 2 at D = 1 (nudge-experiment --quick --runs 10 --episodes 2 --d 1 --eval-tasks 1, seeds
- * 1-8, 80 runs each):
+ * 1-8, 80 runs each), before the step gate (--step-gate 0):
  *   ranked by L (--robust 0)                    63/80, per-seed medians 0.9-5.2% (mean 2.6%)
  *   by L without yaw (--robust 0 --rot-weight 0) 66/80, medians 1.7-3.1% (mean 2.3%)
  *   robust score (--robust 1e-9)                67/80, medians 0.9-2.2% (mean 1.5%)
  * (--rot-weight 1e-4: 14/20 on seeds 1-2, against 16/20 for L.) The robust score halves
- * the typical error; the runs it still misses started far (D = 1 draws up to 97% off) and
- * overshoot in their fourth CEM iteration (0.31 -> 0.75 -> 1.086, 1.94 -> 1.21 -> 0.90).
+ * the typical error; the runs it still missed started far (D = 1 draws up to 97% off) and
+ * overshot in their fourth CEM iteration (0.31 -> 0.75 -> 1.086, 1.94 -> 1.21 -> 0.90),
+ * which the step gate mends (74/80 with it; L 68/80).
  * It is not the default because it costs refit time: its log keeps poor candidates'
  * partial scores under the pruning bound longer, and nudge-bench's 10 x 5 s refit
  * (refit_s_10x5s_robust) goes past the adapter's 10 s budget. */

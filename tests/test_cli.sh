@@ -190,6 +190,7 @@ int_cases nudge-adapter --nice 20
 num_cases nudge-adapter --prior-d 0
 num_cases nudge-adapter --replay-dt 1
 num_cases nudge-adapter --replay-window -1
+num_cases nudge-adapter --robust 2
 bad nudge-adapter "--threads|out of range" --replay-window 0 --threads 0
 seed_cases nudge-adapter --seed
 theta_cases nudge-adapter --theta
