@@ -68,10 +68,10 @@
  *   L        63       69         68          67
  *   robust   67       71         74          74
  * gate 1 cut the growth on noisy slopes (per seed 6-10 against 8-10 at 0.75). Checked on
- * seeds 9-16, which did not choose it (robust): gate 0 67/80, gate 0.75 69/80; a bracket
- * test instead (grow only while at most half an elite count of worse samples lie beyond
- * the elite mean) 74/80 and 71/80, either test passing 74/80 and 70/80: no better, so
- * the simpler rule stays. The gate's cost:
+ * seeds 9-16, which did not choose it (robust): gate 0 67/80, gate 0.75 69/80. Two other
+ * rules, measured with scratch code that is not kept (seeds 1-8 / 9-16): growing only
+ * while at most half an elite count of worse samples lie beyond the elite mean, 74/71;
+ * either that or the gate, 74/70. No better, so the simpler rule stays. The gate's cost:
  * a noisy slope's short step shrinks the std (0.252 -> 0.367 -> 0.435; ungated 0.961).
  *
  * Replay: FORCE (the paper's simulation replay) re-anchored every 0.1 s (nds_replay.h).

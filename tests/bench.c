@@ -101,14 +101,17 @@ static int record_push5(const nds_model *w, mjData *d, int i, nd_rollout *r) {
 int main(int argc, char **argv) {
   char err[512];
   int reps = 30;
-  double plan_dt = 0.005;
+  double plan_dt = 0.005, robust = NDS_FIT_ROBUST_SCALE;
   for (int i = 1; i < argc; i++) {
     if (!strcmp(argv[i], "-h") || !strcmp(argv[i], "--help")) {
-      printf("usage: nudge-bench [--reps N] [--plan-dt S]\n"
+      printf("usage: nudge-bench [--reps N] [--plan-dt S] [--robust S]\n"
              "Measures raw mj_step rate, batched rollout efficiency on 1 and 2 workers,\n"
-             "plan latency at the paper's settings and the planning model's prediction error.\n"
+             "plan latency at the paper's settings, the planning model's prediction error\n"
+             "and the adapter's refit time.\n"
              "  --reps N      plans per latency figure (default 30)\n"
-             "  --plan-dt S   planning model timestep (default 0.005)\n");
+             "  --plan-dt S   planning model timestep (default 0.005)\n"
+             "  --robust S    scale of the robust score timed as refit_s_10x5s_robust, m^2,\n"
+             "                (0, 1] (default 1e-9, the study's)\n");
       return 0;
     }
     int rc = -1;
@@ -116,6 +119,13 @@ int main(int argc, char **argv) {
       rc = nd_parse_int(argv[++i], "--reps", 3, 10000, &reps, err, sizeof(err));
     else if (i + 1 < argc && !strcmp(argv[i], "--plan-dt"))
       rc = nd_parse_double(argv[++i], "--plan-dt", 1e-4, 0.02, &plan_dt, err, sizeof(err));
+    else if (i + 1 < argc && !strcmp(argv[i], "--robust")) {
+      rc = nd_parse_double(argv[++i], "--robust", 0, 1, &robust, err, sizeof(err));
+      if (!rc && !(robust > 0)) {
+        snprintf(err, sizeof(err), "--robust must be > 0 (0 would time L again)");
+        rc = -1;
+      }
+    }
     else
       snprintf(err, sizeof(err), "unknown option or missing value: %s", argv[i]);
     if (rc) {
@@ -266,7 +276,8 @@ int main(int argc, char **argv) {
    * mode with two record steps per model step, as the adapter runs it (a 2 ms model, whose
    * replay of the true theta is not exact: its L(theta_true) says how far the coarse step
    * strays), in a 1 ms one, in the other replay mode at 1 ms for comparison, and in the
-   * adapter's configuration ranked by the study's robust score (nds_fit.h). */
+   * adapter's configuration ranked by the robust score (--robust; the study's scale by
+   * default, nds_fit.h). */
   enum { NREC = 10 };
   nd_rollout recs[NREC];
   for (int i = 0; i < NREC; i++) {
@@ -287,7 +298,7 @@ int main(int argc, char **argv) {
   /* The adapter's default model step first (nudge-adapter --replay-dt). */
   double refit_s[4] = {0}, fit_dt[4] = {0.002, 0.001, 0.001, 0.002};
   const int fit_mode[4] = {dmode, dmode, omode, dmode};
-  const double fit_robust[4] = {dcfg.robust, dcfg.robust, dcfg.robust, NDS_FIT_ROBUST_SCALE};
+  const double fit_robust[4] = {dcfg.robust, dcfg.robust, dcfg.robust, robust};
   /* The adapter's configuration is timed REFIT_REPS times (same seed, so the same work):
    * its figure is the median, as the target is checked against it. */
   enum { REFIT_REPS = 3 };
