@@ -358,3 +358,19 @@ int nds_theta_apply(nds_model *nm, const double theta[NDS_NTHETA], char *err, in
   memcpy(nm->cfg.theta, theta, sizeof(nm->cfg.theta));
   return 0;
 }
+
+void nds_contacts(const nds_model *nm, const mjData *d, int *obj_table, int *obj_ee) {
+  const mjModel *m = nm->m;
+  int nt = 0, ne = 0;
+  for (int c = 0; c < d->ncon; c++) {
+    /* Contacts the solver ignores (MuJoCo's gap zone) exert nothing: skip them. */
+    if (d->contact[c].exclude) continue;
+    int b1 = m->geom_bodyid[d->contact[c].geom1], b2 = m->geom_bodyid[d->contact[c].geom2];
+    if (b1 != nm->obj_body && b2 != nm->obj_body) continue;
+    int other = b1 == nm->obj_body ? b2 : b1;
+    nt += other == 0;
+    ne += other == nm->ee_body;
+  }
+  *obj_table = nt;
+  *obj_ee = ne;
+}

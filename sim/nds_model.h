@@ -79,4 +79,8 @@ int nds_theta_parse(const char *s, const char *what, double theta[NDS_NTHETA], c
 /* Apply theta to the model's contacts and sphere mass. Return 0, or -1 (model unchanged). */
 int nds_theta_apply(nds_model *nm, const double theta[NDS_NTHETA], char *err, int errlen);
 
+/* Count d's active contacts (as the last mj_step or mj_forward left them) between the
+ * object and the world's geoms (the table), and between the object and the sphere. */
+void nds_contacts(const nds_model *nm, const mjData *d, int *obj_table, int *obj_ee);
+
 #endif

@@ -304,10 +304,46 @@ static void test_rest_is_stable(void **state) {
     assert_near(nds_state_yaw(&e), 0.4, 1e-4);
     assert_near(e.ee_pos[0], ee[0], 1e-12);
     assert_int_equal(d->ncon, 4);
+    int nt = -1, ne = -1;
+    nds_contacts(&nm, d, &nt, &ne);
+    assert_int_equal(nt, 4);
+    assert_int_equal(ne, 0);
     for (int w = 0; w < mjNWARNING; w++) assert_int_equal(d->warning[w].number, 0);
     mj_deleteData(d);
     nds_model_free(&nm);
   }
+}
+
+/* nds_contacts tells the sphere's contact from the table's: a sphere 0.5 mm into the box's
+ * -x face adds one object-sphere contact to the four corners; one 1 mm clear adds none. */
+static void test_contacts_by_pair(void **state) {
+  (void)state;
+  nds_scene_cfg cfg;
+  nds_scene_cfg_default(&cfg);
+  nds_model nm;
+  build(&nm, &cfg);
+  mjData *d = mj_makeData(nm.m);
+  const double depth[2] = {0.0005, -0.001};
+  for (int i = 0; i < 2; i++) {
+    nds_state s;
+    const double ee[2] = {-cfg.obj_half[0] - cfg.ee_radius + depth[i], 0.0};
+    nds_state_rest(&nm, 0.0, 0.0, 0.0, ee, &s);
+    char err[256];
+    assert_int_equal(nds_state_set(&nm, d, &s, err, sizeof(err)), 0);
+    for (int k = 0; k < 300; k++) mj_step(nm.m, d);
+    /* Settled on the table, then the sphere put back where the case wants it. */
+    nds_state_get(&nm, d, &s);
+    s.ee_pos[0] = ee[0] + s.obj_pos[0];
+    s.ee_vel[0] = s.ee_vel[1] = 0;
+    assert_int_equal(nds_state_set(&nm, d, &s, err, sizeof(err)), 0);
+    mj_forward(nm.m, d);
+    int nt = -1, ne = -1;
+    nds_contacts(&nm, d, &nt, &ne);
+    assert_int_equal(nt, 4);
+    assert_int_equal(ne, i == 0 ? 1 : 0);
+  }
+  mj_deleteData(d);
+  nds_model_free(&nm);
 }
 
 static void test_state_round_trip(void **state) {
@@ -559,6 +595,7 @@ int main(void) {
       cmocka_unit_test(test_copy_is_independent),
       cmocka_unit_test(test_mass_changes_response),
       cmocka_unit_test(test_rest_is_stable),
+      cmocka_unit_test(test_contacts_by_pair),
       cmocka_unit_test(test_state_round_trip),
       cmocka_unit_test(test_load_file),
       cmocka_unit_test(test_ctrl),
