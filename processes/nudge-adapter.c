@@ -57,6 +57,7 @@ typedef struct {
   int replay_mode;            /* NDS_REPLAY_*, -1: the fit configuration's default */
   double replay_window;       /* s, < 0: the fit configuration's default */
   double robust;              /* m^2: CEM ranks by the robust score; 0: by L (nds_fit.h) */
+  int share_hidden;           /* nds_fit_cfg.share_hidden */
 } opts;
 
 static const char *theta_names[NDS_NTHETA] = {"slide", "torsion", "roll", "mass"};
@@ -100,12 +101,16 @@ static void usage(FILE *f) {
           "  --robust S         rank candidates by the replay windows' robust score of scale\n"
           "                     S m^2, 0..1 (default 0: by L, the paper's; 1e-9 is the\n"
           "                     study's, which fits better but takes ~1.2x as long; README)\n"
+          "  --share-hidden B   1: start every candidate's replay windows from the CEM\n"
+          "                     mean's hidden state (the box's height and tilt), 0: each\n"
+          "                     from its own (default %d; with --robust 1e-9, the study's\n"
+          "                     fit; sim/nds_replay.h)\n"
           "  --seed N           CEM seed (default 1; a restart adds the history's version)\n"
           "  --lcm-url URL      LCM URL (default: $LCM_DEFAULT_URL, else %s)\n"
           "  -h, --help         this text\n\n"
           "stdout: one line per refit. Exit status: 0 after SIGINT/SIGTERM, 1 on a runtime\n"
           "failure (history locked by another adapter, unreadable), 2 on bad arguments.\n",
-          NDP_DEFAULT_URL);
+          NDS_FIT_SHARE_HIDDEN_DEFAULT, NDP_DEFAULT_URL);
 }
 
 static int parse_fit(const char *s, int fit[NDS_NTHETA], char *err, int errlen) {
@@ -150,6 +155,7 @@ static int parse_opts(int argc, char **argv, opts *o) {
   o->D = 1.0;
   o->seed = 1;
   o->nice = 10;
+  o->share_hidden = NDS_FIT_SHARE_HIDDEN_DEFAULT;
   /* Two record steps per model step: 3.5x faster than 1 ms on the bench's ten 5 s pushes
    * (refit_s_10x5s), and re-anchoring keeps the coarse step's error from compounding, so
    * the fit lands where the 1 ms one does (sliding 1.007 at both). */
@@ -171,7 +177,7 @@ static int parse_opts(int argc, char **argv, opts *o) {
                 !strcmp(a, "--threads") || !strcmp(a, "--nice") ||
                 !strcmp(a, "--replay-dt") || !strcmp(a, "--seed") ||
                 !strcmp(a, "--replay-mode") || !strcmp(a, "--replay-window") ||
-                !strcmp(a, "--robust");
+                !strcmp(a, "--robust") || !strcmp(a, "--share-hidden");
     if (!known) {
       snprintf(err, sizeof(err), "unknown option: %s", a);
       rc = -1;
@@ -195,6 +201,7 @@ static int parse_opts(int argc, char **argv, opts *o) {
     else if (!strcmp(a, "--replay-dt")) rc = nd_parse_double(v, a, 1e-4, 0.01, &o->replay_dt, err, sizeof(err));
     else if (!strcmp(a, "--replay-window")) rc = nd_parse_double(v, a, 0, 60, &o->replay_window, err, sizeof(err));
     else if (!strcmp(a, "--robust")) rc = nd_parse_double(v, a, 0, 1, &o->robust, err, sizeof(err));
+    else if (!strcmp(a, "--share-hidden")) rc = nd_parse_int(v, a, 0, 1, &o->share_hidden, err, sizeof(err));
     else if (!strcmp(a, "--replay-mode")) {
       const int modes[] = {NDS_REPLAY_FORCE, NDS_REPLAY_VELOCITY, NDS_REPLAY_SETPOINT};
       o->replay_mode = -1;
@@ -632,6 +639,7 @@ int main(int argc, char **argv) {
   if (o.replay_mode >= 0) fc.replay.mode = o.replay_mode;
   if (o.replay_window >= 0) fc.replay.window = o.replay_window;
   fc.robust = o.robust;
+  fc.share_hidden = o.share_hidden;
   fc.pop = 32;
   fc.iters = 2;
   fc.elite_frac = 0.2;

@@ -62,6 +62,7 @@ static const char *pname[NFIT] = {"slide", "torsion", "roll"};
 
 typedef struct {
   int runs, episodes, threads, pop, iters, neval, mode, force, quick, landscape;
+  int share_hidden;  /* the fit's (nds_fit_cfg) */
   double tau, plan_dt, window;
   double step_std, step_gate, rel_floor, k2, robust;  /* the fit's (nds_fit_cfg) */
   uint64_t seed;
@@ -146,6 +147,9 @@ static void usage(FILE *f) {
 "  --robust S       refit CEM ranks candidates by each window's L through a Cauchy\n"
 "                   loss of scale S, m^2, 0..1 (default 0: by L, the paper's; 1e-9\n"
 "                   measured best, nds_fit.c). Reported losses are L either way\n"
+"  --share-hidden B refit CEM: 1 starts every candidate's replay windows from the\n"
+"                   iteration mean's hidden state (the box's height and tilt), 0 each\n"
+"                   from its own (default %d; nds_replay.h)\n"
 "  --plan-dt S      planning model timestep, s (default 0.005; world and refit: 0.001)\n"
 "  --quick          a preset for a first look, under 10 min on 2 cores: --runs 3\n"
 "                   --episodes 4 --pop 32 --iters 2 --tau 3 (explicit options win)\n"
@@ -179,7 +183,7 @@ static void usage(FILE *f) {
 "and once: val_loss_band_min/max, the validation loss of %d models whose sliding friction\n"
 "is within +-%g%% of the truth (the rest exact). Contacts make the replay loss rough near\n"
 "the truth, so a loss inside the band cannot tell such a model from a worse one.\n",
-          BAND_N, 100 * BAND_DU);
+          NDS_FIT_SHARE_HIDDEN_DEFAULT, BAND_N, 100 * BAND_DU);
 }
 
 /* ---- options ---- */
@@ -235,6 +239,7 @@ static int parse_args(int argc, char **argv, opts *o) {
     o->rel_floor = fd.rel_floor;
     o->k2 = fd.k2;
     o->robust = fd.robust;
+    o->share_hidden = fd.share_hidden;
   }
   o->D[0] = 0.2, o->D[1] = 1.0, o->nD = 2;
   for (int i = 1; i < argc; i++) {
@@ -249,7 +254,8 @@ static int parse_args(int argc, char **argv, opts *o) {
     static const char *const with_value[] = {
         "--out", "--runs", "--episodes", "--seed", "--threads", "--pop",
         "--iters", "--tau", "--eval-tasks", "--plan-dt", "--d", "--replay", "--window",
-        "--step-std", "--step-gate", "--rel-floor", "--rot-weight", "--robust"};
+        "--step-std", "--step-gate", "--rel-floor", "--rot-weight", "--robust",
+        "--share-hidden"};
     int known = 0;
     for (size_t k = 0; k < sizeof(with_value) / sizeof(with_value[0]); k++)
       known |= !strcmp(a, with_value[k]);
@@ -277,6 +283,7 @@ static int parse_args(int argc, char **argv, opts *o) {
     else if (!strcmp(a, "--rel-floor")) rc = nd_parse_double(v, a, 0, 0.99, &o->rel_floor, err, sizeof(err));
     else if (!strcmp(a, "--rot-weight")) rc = nd_parse_double(v, a, 0, 1, &o->k2, err, sizeof(err));
     else if (!strcmp(a, "--robust")) rc = nd_parse_double(v, a, 0, 1, &o->robust, err, sizeof(err));
+    else if (!strcmp(a, "--share-hidden")) rc = nd_parse_int(v, a, 0, 1, &o->share_hidden, err, sizeof(err));
     else if (!strcmp(a, "--replay")) {
       rc = 0;
       if (!strcmp(v, "setpoint")) o->mode = NDS_REPLAY_SETPOINT;
@@ -357,6 +364,7 @@ static void fit_cfg(const opts *o, int mode, nds_fit_cfg *fc) {
   fc->rel_floor = o->rel_floor;
   fc->k2 = o->k2;
   fc->robust = o->robust;
+  fc->share_hidden = o->share_hidden;
 }
 
 /* "%g" of D with the dot kept out of names: 0.2 -> "0.2", 1.0 -> "1". */
@@ -869,11 +877,12 @@ static void write_config(const opts *o, int argc, char **argv) {
   for (int i = 0; i < o->nD; i++) fprintf(f, " %g", o->D[i]);
   fprintf(f, "\nseed %llu\nplanner N %d C %d, plan dt %g s\ntau %g s\neval tasks %d\n"
              "refit Q 32 C 2, replay %s, window %g s, step_std %g, step_gate %g, rel_floor %g, "
-             "rot weight %g m^2/rad, robust %g m^2, world and refit dt 0.001 s\n"
+             "rot weight %g m^2/rad, robust %g m^2, share hidden %d, world and refit dt "
+             "0.001 s\n"
              "threads %d\n",
           (unsigned long long)o->seed, o->pop, o->iters, o->plan_dt, o->tau, o->neval,
-          nds_replay_mode_name(o->mode), o->window, o->step_std, o->step_gate, o->rel_floor, o->k2, o->robust,
-          o->threads);
+          nds_replay_mode_name(o->mode), o->window, o->step_std, o->step_gate, o->rel_floor,
+          o->k2, o->robust, o->share_hidden, o->threads);
   fclose(f);
 }
 

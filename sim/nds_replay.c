@@ -190,6 +190,25 @@ static void reanchor(const nds_model *nm, mjData *d, const nd_rollout *r, int i)
   }
 }
 
+/* The object's hidden state (qpos, qvel: what re-anchoring keeps of the model's own) at
+ * anchor a: stored into hid_out, then replaced by hid_in's where that holds one. */
+static void hidden(const nds_model *nm, mjData *d, long a, const double *hid_in,
+                   double *hid_out) {
+  mjtNum *q = d->qpos + nm->obj_qpos, *v = d->qvel + nm->obj_dof;
+  if (hid_out) {
+    double *h = hid_out + NDS_REPLAY_HIDDEN * a;
+    memcpy(h, q, 7 * sizeof(double));
+    memcpy(h + 7, v, 6 * sizeof(double));
+  }
+  if (hid_in) {
+    const double *h = hid_in + NDS_REPLAY_HIDDEN * a;
+    for (int i = 0; i < NDS_REPLAY_HIDDEN; i++)
+      if (!isfinite(h[i])) return;  /* the reference did not get here: keep our own */
+    memcpy(q, h, 7 * sizeof(double));
+    memcpy(v, h + 7, 6 * sizeof(double));
+  }
+}
+
 static void diverge(nds_replay_terms *out) {
   out->pos_o = out->pos_ee = out->rot_o = out->robust = NDS_REPLAY_DIVERGED;
   out->diverged = 1;
@@ -199,7 +218,8 @@ static void diverge(nds_replay_terms *out) {
  * windows' score passes bound (never for bound = INFINITY). */
 static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
                   const nd_rollout *r, double k1, double k2, double robust, double bound,
-                  nds_replay_terms *out, double *pred, char *err, int errlen) {
+                  const double *hid_in, double *hid_out, nds_replay_terms *out,
+                  double *pred, char *err, int errlen) {
   memset(out, 0, sizeof(*out)); /* padding too, so terms compare bytewise */
   int k = nds_replay_ratio(nm, r, err, errlen);
   if (k < 0) return -1;
@@ -240,6 +260,8 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
   const double mdt = m->opt.timestep;
   /* Model steps per window; 0: never re-anchor. */
   const long W = cfg->window > 0 ? lround(fmax(1, cfg->window / mdt)) : 0;
+  if (hid_out)
+    for (long i = 0; i < (W ? (T - 1) / W : 0) * NDS_REPLAY_HIDDEN; i++) hid_out[i] = NAN;
   /* The robust score's windows are the re-anchoring ones (the whole replay is one when not
    * re-anchoring). rs sums the finished windows' log(1 + e_w / robust), ws the running
    * window's weighted errors. e_w divides by the window's full length wlen, known in
@@ -252,7 +274,10 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
   double rs = 0, ws = 0, wcap = robust > 0 ? wlen * robust * expm1(limit) : 0;
   for (; j < T && !diverged && !cut; j++) {
     const int base = j * k;
-    if (W && j > 0 && j % W == 0) reanchor(nm, d, r, base - 1);
+    if (W && j > 0 && j % W == 0) {
+      hidden(nm, d, j / W - 1, hid_in, hid_out);
+      reanchor(nm, d, r, base - 1);
+    }
     const double vel[2] = {d->qvel[dof0], d->qvel[dof1]};
     double f[2];
     if (mode == NDS_REPLAY_SETPOINT) {
@@ -331,13 +356,23 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
 
 int nds_replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg, const nd_rollout *r,
                nds_replay_terms *out, double *pred, char *err, int errlen) {
-  return replay(nm, d, cfg, r, 0, 0, 0, INFINITY, out, pred, err, errlen);
+  return replay(nm, d, cfg, r, 0, 0, 0, INFINITY, NULL, NULL, out, pred, err, errlen);
 }
 
 int nds_replay_bounded(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
                        const nd_rollout *r, double k1, double k2, double robust,
-                       double bound, nds_replay_terms *out, char *err, int errlen) {
-  return replay(nm, d, cfg, r, k1, k2, robust, bound, out, NULL, err, errlen);
+                       double bound, const double *hid_in, double *hid_out,
+                       nds_replay_terms *out, char *err, int errlen) {
+  return replay(nm, d, cfg, r, k1, k2, robust, bound, hid_in, hid_out, out, NULL, err,
+                errlen);
+}
+
+long nds_replay_anchors(const nds_model *nm, const nds_replay_cfg *cfg, const nd_rollout *r) {
+  char err[160];
+  const int k = nds_replay_ratio(nm, r, err, sizeof(err));
+  if (k < 1 || !(cfg->window > 0)) return 0;
+  const long W = lround(fmax(1, cfg->window / nm->m->opt.timestep)), T = r->n / k;
+  return T > 0 ? (T - 1) / W : 0;
 }
 
 double nds_replay_loss(const nds_replay_terms *t, double k1, double k2) {

@@ -114,7 +114,24 @@ int nds_replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg, const 
  * of squares, is then mostly those few windows; the log lets every window count. */
 int nds_replay_bounded(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
                        const nd_rollout *r, double k1, double k2, double robust,
-                       double bound, nds_replay_terms *out, char *err, int errlen);
+                       double bound, const double *hid_in, double *hid_out,
+                       nds_replay_terms *out, char *err, int errlen);
+
+/* Shared hidden state. Re-anchoring puts back what was observed and keeps the model's own
+ * object height, tilt and their rates, which pushing makes chaotic (MuJoCo's soft contact
+ * lifts a sliding box, nds_fit.c): two candidates a hair apart start each window from
+ * different hops. A replay given hid_out records, at each of its
+ * nds_replay_anchors re-anchorings, the object's qpos and qvel as the model had them
+ * (NDS_REPLAY_HIDDEN values each; NaN where it did not get, e.g. after diverging); one
+ * given hid_in starts each window from those instead of its own (NaN entries: its own),
+ * the observed part put back over them as always. Candidates replayed from one reference
+ * replay's hidden state then differ only by what theta does within a window. Replaying
+ * with the recording theta's own hidden state stays exact. */
+#define NDS_REPLAY_HIDDEN 13
+
+/* Re-anchorings in replaying r in nm as cfg says (0 without re-anchoring or for a record
+ * nds_replay_ratio refuses). */
+long nds_replay_anchors(const nds_model *nm, const nds_replay_cfg *cfg, const nd_rollout *r);
 
 /* L of one rollout's terms: pos_o + k1 pos_ee + k2 rot_o. */
 double nds_replay_loss(const nds_replay_terms *t, double k1, double k2);

@@ -222,8 +222,8 @@ static void test_replay_robust(void **state) {
   char err[256];
   const nd_rollout *r = &push[1];
   nds_replay_terms t;
-  assert_int_equal(nds_replay_bounded(&nm, d, &rc, r, k1, k2, scale, INFINITY, &t, err,
-                                      sizeof(err)), 0);
+  assert_int_equal(nds_replay_bounded(&nm, d, &rc, r, k1, k2, scale, INFINITY, NULL, NULL,
+                                      &t, err, sizeof(err)), 0);
   /* Re-anchoring keeps the model's own tilt, so the truth is not exact (windows ~1e-10
    * m^2). */
   const double at_truth = t.robust;
@@ -249,8 +249,8 @@ static void test_replay_robust(void **state) {
   want /= nwin;
   free(pred);
   nds_replay_terms tb;
-  assert_int_equal(nds_replay_bounded(&nb, d, &rc, r, k1, k2, scale, INFINITY, &tb, err,
-                                      sizeof(err)), 0);
+  assert_int_equal(nds_replay_bounded(&nb, d, &rc, r, k1, k2, scale, INFINITY, NULL, NULL,
+                                      &tb, err, sizeof(err)), 0);
   printf("robust score: truth %.4f, sliding friction +2%%: %.4f over %d windows (L %.3e)\n",
          at_truth, tb.robust, nwin, nds_replay_loss(&tb, k1, k2));
   assert_true(nwin == (r->n + W - 1) / W && nwin > 3);
@@ -260,12 +260,83 @@ static void test_replay_robust(void **state) {
   assert_true(tb.pos_o == t.pos_o && tb.pos_ee == t.pos_ee && tb.rot_o == t.rot_o);
 
   nds_replay_terms tc;
-  assert_int_equal(nds_replay_bounded(&nb, d, &rc, r, k1, k2, scale, 0.5 * want, &tc, err,
-                                      sizeof(err)), 0);
+  assert_int_equal(nds_replay_bounded(&nb, d, &rc, r, k1, k2, scale, 0.5 * want, NULL, NULL,
+                                      &tc, err, sizeof(err)), 0);
   assert_true(tc.cut);
   assert_true(tc.robust > 0.5 * want && tc.robust <= want);
   mj_deleteData(d);
   nds_model_free(&nb);
+  nds_model_free(&nm);
+}
+
+/* Shared hidden state (nds_replay.h). Recorded at the truth and given back, it changes
+ * nothing: the replay is bit for bit its own. A replay cut short leaves NaN past the cut,
+ * which a later replay ignores (it keeps its own state there). Candidates a hair apart
+ * started from one reference's hidden state score nearly alike, where each from its own
+ * may not: how far a 0.01 % change of sliding friction moves the robust score, against
+ * how far a 5 % change does. */
+static void test_replay_shared_hidden(void **state) {
+  (void)state;
+  const double k1 = 1, k2 = 1e-3, scale = 1e-9;
+  nds_model nm;
+  nds_test_build(&nm, 0.001, NULL);
+  mjData *d = mj_makeData(nm.m);
+  nds_replay_cfg rc;
+  nds_replay_cfg_default(&rc, NDS_REPLAY_FORCE);
+  rc.window = 0.1;
+  char err[256];
+  const nd_rollout *r = &push[1];
+  const long na = nds_replay_anchors(&nm, &rc, r);
+  assert_int_equal(na, (r->n - 1) / 100);
+  nds_replay_cfg one = rc;
+  one.window = 0;
+  assert_int_equal(nds_replay_anchors(&nm, &one, r), 0);
+  double *hid = malloc(sizeof(double) * NDS_REPLAY_HIDDEN * na);
+  double *h2 = malloc(sizeof(double) * NDS_REPLAY_HIDDEN * na);
+  nds_replay_terms own, fed;
+  assert_int_equal(nds_replay_bounded(&nm, d, &rc, r, k1, k2, scale, INFINITY, NULL, hid,
+                                      &own, err, sizeof(err)), 0);
+  for (long i = 0; i < NDS_REPLAY_HIDDEN * na; i++) assert_true(isfinite(hid[i]));
+  assert_int_equal(nds_replay_bounded(&nm, d, &rc, r, k1, k2, scale, INFINITY, hid, NULL,
+                                      &fed, err, sizeof(err)), 0);
+  assert_memory_equal(&own, &fed, sizeof(own));
+
+  /* Cut after its first windows: the rest of h2 stays NaN, and fed back it is ignored. */
+  nds_replay_terms cut;
+  assert_int_equal(nds_replay_bounded(&nm, d, &rc, r, k1, k2, scale, 0.2 * own.robust, NULL,
+                                      h2, &cut, err, sizeof(err)), 0);
+  assert_true(cut.cut);
+  assert_true(isnan(h2[NDS_REPLAY_HIDDEN * (na - 1)]));
+
+  /* Scores along sliding friction: own hidden state and shared from a reference at 1.05. */
+  const double xs[4] = {1.02, 1.0201, 1.07, 1.0701};
+  double S[2][4];
+  nds_model nr;
+  nds_test_build(&nr, 0.001, (const double[NDS_NTHETA]){1.05, 0.005, 1e-4, 1.0});
+  assert_int_equal(nds_replay_bounded(&nr, d, &rc, r, k1, k2, scale, INFINITY, NULL, h2,
+                                      &cut, err, sizeof(err)), 0);
+  for (int i = 0; i < 4; i++) {
+    nds_model nc;
+    nds_test_build(&nc, 0.001, (const double[NDS_NTHETA]){xs[i], 0.005, 1e-4, 1.0});
+    nds_replay_terms t;
+    for (int sh = 0; sh < 2; sh++) {
+      assert_int_equal(nds_replay_bounded(&nc, d, &rc, r, k1, k2, scale, INFINITY,
+                                          sh ? h2 : NULL, NULL, &t, err, sizeof(err)), 0);
+      S[sh][i] = t.robust;
+    }
+    nds_model_free(&nc);
+  }
+  printf("shared hidden: own %.4f %.4f | %.4f %.4f; shared %.4f %.4f | %.4f %.4f\n",
+         S[0][0], S[0][1], S[0][2], S[0][3], S[1][0], S[1][1], S[1][2], S[1][3]);
+  for (int p = 0; p < 4; p += 2) {
+    const double hair_own = fabs(S[0][p + 1] - S[0][p]), hair = fabs(S[1][p + 1] - S[1][p]);
+    assert_true(hair < 0.25 * hair_own);
+    assert_true(5 * hair < S[1][2] - S[1][0]);  /* 5 % still counts, in the right direction */
+  }
+  nds_model_free(&nr);
+  free(h2);
+  free(hid);
+  mj_deleteData(d);
   nds_model_free(&nm);
 }
 
@@ -677,6 +748,26 @@ static void test_fit_workers_identical(void **state) {
   }
   assert_memory_equal(rob[0], rob[1], sizeof(rob[0]));
   assert_true(rob[1][1].mean[NDS_TH_SLIDE] != out[1][1].mean[NDS_TH_SLIDE]);
+  /* And with a shared hidden state, on 1 and 2 workers: each iteration first replays its
+   * mean on every rollout (counted among the replays), then the candidates from it. */
+  cfg.share_hidden = 1;
+  nds_fit_out sh[3][2];
+  for (int k = 0; k < 3; k++) {
+    cfg.prune = k < 2;
+    nd_pool *pk = nd_pool_create(k == 0 ? 1 : 2, err, sizeof(err));
+    f = nds_fit_create(&nm, &cfg, pk, err, sizeof(err));
+    assert_non_null(f);
+    for (int run = 0; run < 2; run++) {
+      assert_int_equal(nds_fit_run(f, rs, 2, &sh[k][run], err, sizeof(err)), 0);
+      if (k == 2) assert_int_equal(sh[k][run].replays, (8 * 2 + 1) * 2 + 2 * 2);
+      sh[k][run].replays = 0;
+    }
+    nds_fit_free(f);
+    nd_pool_free(pk);
+  }
+  printf("shared hidden: mean %.6f (own hidden %.6f)\n", sh[1][1].mean[0], rob[1][1].mean[0]);
+  assert_memory_equal(sh[0], sh[1], sizeof(sh[0]));
+  assert_memory_equal(sh[1], sh[2], sizeof(sh[1]));
   nd_pool_free(pool);
   for (int i = 0; i < 2; i++) rec_free(&rs[i]);
   nds_model_free(&nm);
@@ -768,6 +859,7 @@ static void test_fit_bad_config(void **state) {
   BAD("step_std", c->step_std = -1);
   BAD("step_gate", c->step_gate = NAN);
   BAD("rel_floor", c->rel_floor = 1);
+  BAD("share_hidden", c->share_hidden = 2);
   BAD("replay.window", c->replay.window = NAN);
   BAD("replay.window", c->replay.window = -0.1);
   BAD("fit[1]", c->fit[1] = 2);
@@ -873,6 +965,7 @@ int main(void) {
       cmocka_unit_test(test_replay_exact),
       cmocka_unit_test(test_replay_wrong_theta),
       cmocka_unit_test(test_replay_robust),
+      cmocka_unit_test(test_replay_shared_hidden),
       cmocka_unit_test(test_replay_ratio),
       cmocka_unit_test(test_replay_velocity),
       cmocka_unit_test(test_replay_bad_records),
