@@ -5,6 +5,8 @@
  *
  * 1. One task in the running system appends exactly one more valid rollout to the buffer,
  *    and a PARAMS message with the next version, fitted on that many rollouts, arrives.
+ *    The adapter runs the study's fit (--robust 1e-9 --share-hidden 1), and its log's
+ *    start line says so.
  * 2. A SIGKILLed and restarted adapter goes on from its history: it republishes the
  *    version it had reached (>= 2, so a refit from scratch, version 1, cannot pass for
  *    it) without refitting, and the next task gives the version after.
@@ -214,6 +216,18 @@ static void one_task_one_record_one_version(void **state) {
     fail_msg("no PARAMS version %lld within 60 s (newest: %lld)", (long long)(v0 + 1),
              (long long)W.version);
   assert_int_equal(W.buffer_size, n1);
+
+  /* The fit ran as configured: the adapter's start line in its log says so. */
+  char path[400], line[2048];
+  snprintf(path, sizeof(path), "%s/run/adapter.log", W.dir);
+  FILE *f = fopen(path, "r");
+  assert_non_null(f);
+  int said = 0;
+  while (fgets(line, sizeof(line), f))
+    said |= strstr(line, "ranked by the robust score of scale 1e-09 m^2, shared hidden "
+                         "state") != NULL;
+  fclose(f);
+  assert_true(said);
 }
 
 static void killed_adapter_resumes(void **state) {
@@ -300,9 +314,13 @@ static int setup(void **state) {
 
   char logdir[320];
   snprintf(logdir, sizeof(logdir), "%s/run", W.dir);
+  /* The adapter runs the study's fit (robust score, shared hidden state): the default one
+   * runs in test_up_signals and test_soak, so both reach a real process. */
   const char *args[] = {"run", "--log-dir", logdir, "--buffer", W.buffer, "--theta", THETA,
                         "--planner-arg", "--threads", "--planner-arg", "1",
-                        "--adapter-arg", "--threads", "--adapter-arg", "1", NULL};
+                        "--adapter-arg", "--threads", "--adapter-arg", "1",
+                        "--adapter-arg", "--robust", "--adapter-arg", "1e-9",
+                        "--adapter-arg", "--share-hidden", "--adapter-arg", "1", NULL};
   W.up = spawn("up", args);
   for (int i = 0; i < NPROC; i++)
     if (W.up < 0 || !wait_heartbeat(i, 0, 30.0 * W.slow)) {
