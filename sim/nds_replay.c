@@ -209,6 +209,13 @@ static void hidden(const nds_model *nm, mjData *d, long a, const double *hid_in,
   }
 }
 
+/* Model steps per re-anchoring window at model step mdt (0: never re-anchor), and the
+ * re-anchorings of a replay of T model steps: one before each window after the first. */
+static long window_steps(const nds_replay_cfg *cfg, double mdt) {
+  return cfg->window > 0 ? lround(fmax(1, cfg->window / mdt)) : 0;
+}
+static long anchors(long T, long W) { return W && T > 0 ? (T - 1) / W : 0; }
+
 static void diverge(nds_replay_terms *out) {
   out->pos_o = out->pos_ee = out->rot_o = out->robust = NDS_REPLAY_DIVERGED;
   out->diverged = 1;
@@ -258,10 +265,9 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
   nds_ctrl pid;
   nds_ctrl_reset(&pid);
   const double mdt = m->opt.timestep;
-  /* Model steps per window; 0: never re-anchor. */
-  const long W = cfg->window > 0 ? lround(fmax(1, cfg->window / mdt)) : 0;
+  const long W = window_steps(cfg, mdt);
   if (hid_out)
-    for (long i = 0; i < (W ? (T - 1) / W : 0) * NDS_REPLAY_HIDDEN; i++) hid_out[i] = NAN;
+    for (long i = 0; i < anchors(T, W) * NDS_REPLAY_HIDDEN; i++) hid_out[i] = NAN;
   /* The robust score's windows are the re-anchoring ones (the whole replay is one when not
    * re-anchoring). rs sums the finished windows' log(1 + e_w / robust), ws the running
    * window's weighted errors. e_w divides by the window's full length wlen, known in
@@ -370,9 +376,7 @@ int nds_replay_bounded(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg
 long nds_replay_anchors(const nds_model *nm, const nds_replay_cfg *cfg, const nd_rollout *r) {
   char err[160];
   const int k = nds_replay_ratio(nm, r, err, sizeof(err));
-  if (k < 1 || !(cfg->window > 0)) return 0;
-  const long W = lround(fmax(1, cfg->window / nm->m->opt.timestep)), T = r->n / k;
-  return T > 0 ? (T - 1) / W : 0;
+  return k < 1 ? 0 : anchors(r->n / k, window_steps(cfg, nm->m->opt.timestep));
 }
 
 double nds_replay_loss(const nds_replay_terms *t, double k1, double k2) {
