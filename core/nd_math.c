@@ -21,6 +21,17 @@ double nd_quat_yaw(const double q[4]) {
   return atan2(2.0 * (w * z + x * y), w * w + x * x - y * y - z * z);
 }
 
+void nd_quat_nlerp(const double a[4], const double b[4], double f, double q[4]) {
+  const double s = a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] < 0 ? -f : f;
+  double n = 0;
+  for (int i = 0; i < 4; i++) {
+    q[i] = (1 - f) * a[i] + s * b[i];
+    n += q[i] * q[i];
+  }
+  n = sqrt(n);
+  for (int i = 0; i < 4; i++) q[i] /= n;
+}
+
 void nd_yaw_quat(double yaw, double q[4]) {
   q[0] = cos(0.5 * yaw);
   q[1] = 0.0;

@@ -13,6 +13,11 @@ double nd_quat_yaw(const double q[4]);
 /* W-first quaternion of a pure rotation by yaw about world z. */
 void nd_yaw_quat(double yaw, double q[4]);
 
+/* Unit quaternion a fraction f in [0, 1] of the way from unit quaternion a to b, along the
+ * shorter arc (b and -b are one rotation): normalised linear interpolation, which between
+ * two mocap frames a few milliseconds apart is slerp to ~1e-7 rad. */
+void nd_quat_nlerp(const double a[4], const double b[4], double f, double q[4]);
+
 /* Squared and plain Euclidean norm of a 2-vector; distance between two 2-points. */
 double nd_norm2_sq(const double v[2]);
 double nd_norm2(const double v[2]);

@@ -37,7 +37,7 @@ int nd_rollout_alloc(nd_rollout *r, int n) {
   if (n < 0 || n > ND_ROLLOUT_MAX_STEPS) return -1;
   if (n == 0) return 0;
   r->u = calloc((size_t)n * 2, sizeof(double));
-  r->obj = calloc((size_t)n * 3, sizeof(double));
+  r->obj = calloc((size_t)n * ND_ROLLOUT_OBJ, sizeof(double));
   r->ee = calloc((size_t)n * 2, sizeof(double));
   r->sp = calloc((size_t)n * 6, sizeof(double));
   if (!r->u || !r->obj || !r->ee || !r->sp) {
@@ -57,6 +57,23 @@ void nd_rollout_free(nd_rollout *r) {
   r->n = 0;
 }
 
+int nd_rollout_copy(nd_rollout *dst, const nd_rollout *src) {
+  nd_rollout t = *src;
+  if (nd_rollout_alloc(&t, src->n)) {
+    *dst = t;
+    return -1;
+  }
+  const size_t n = (size_t)src->n;
+  memcpy(t.u, src->u, sizeof(double) * 2 * n);
+  memcpy(t.obj, src->obj, sizeof(double) * ND_ROLLOUT_OBJ * n);
+  memcpy(t.ee, src->ee, sizeof(double) * 2 * n);
+  memcpy(t.sp, src->sp, sizeof(double) * 6 * n);
+  *dst = t;
+  return 0;
+}
+
+double *nd_rollout_obj(const nd_rollout *r, int i) { return r->obj + ND_ROLLOUT_OBJ * i; }
+
 double nd_rollout_duration(const nd_rollout *r) { return r->n * r->dt; }
 
 size_t nd_rollout_encoded_size(int n) {
@@ -74,6 +91,20 @@ static int nd_rollout_check_array(const double *a, int rows, int cols, const cha
         return -1;
       }
   return 0;
+}
+
+/* -1 with "name = (w, x, y, z) has norm ..." unless q's norm is within ND_ROLLOUT_QUAT_TOL
+ * of 1 (q finite). */
+static int nd_rollout_check_quat(const double q[4], const char *name, int i, char *err,
+                                 int errlen) {
+  const double norm = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+  if (fabs(norm - 1) <= ND_ROLLOUT_QUAT_TOL) return 0;
+  char at[16] = "";
+  if (i >= 0) snprintf(at, sizeof(at), "[%d]", i);
+  snprintf(err, (size_t)errlen,
+           "rollout: %s%s = (%g, %g, %g, %g) has norm %g, not a unit quaternion", name, at,
+           q[0], q[1], q[2], q[3], norm);
+  return -1;
 }
 
 int nd_rollout_check(const nd_rollout *r, char *err, int errlen) {
@@ -112,10 +143,15 @@ int nd_rollout_check(const nd_rollout *r, char *err, int errlen) {
     return -1;
   }
   if (nd_rollout_check_array(r->u, r->n, 2, "u", err, errlen) ||
-      nd_rollout_check_array(r->obj, r->n, 3, "obj", err, errlen) ||
+      nd_rollout_check_array(r->obj, r->n, ND_ROLLOUT_OBJ, "obj", err, errlen) ||
       nd_rollout_check_array(r->ee, r->n, 2, "ee", err, errlen) ||
-      nd_rollout_check_array(r->sp, r->n, 6, "sp", err, errlen))
+      nd_rollout_check_array(r->sp, r->n, 6, "sp", err, errlen) ||
+      nd_rollout_check_quat(r->obj_quat, "obj_quat", -1, err, errlen))
     return -1;
+  for (int i = 0; i < r->n; i++)
+    if (nd_rollout_check_quat(r->obj + ND_ROLLOUT_OBJ * i + 3, "obj quaternion", i, err,
+                              errlen))
+      return -1;
   return 0;
 }
 
@@ -177,7 +213,7 @@ int nd_rollout_encode(const nd_rollout *r, unsigned char *buf, size_t cap, size_
   for (int k = 0; k < ND_ROLLOUT_NMETA; k++)
     p = nd_put_f64(p, nd_rollout_meta_ptr(r, k), (size_t)nd_rollout_meta[k].count);
   p = nd_put_f64(p, r->u, (size_t)r->n * 2);
-  p = nd_put_f64(p, r->obj, (size_t)r->n * 3);
+  p = nd_put_f64(p, r->obj, (size_t)r->n * ND_ROLLOUT_OBJ);
   p = nd_put_f64(p, r->ee, (size_t)r->n * 2);
   p = nd_put_f64(p, r->sp, (size_t)r->n * 6);
   *len = (size_t)(p - buf);
@@ -194,6 +230,13 @@ int nd_rollout_decode(nd_rollout *r, const unsigned char *buf, size_t len, char 
     return -1;
   }
   const uint32_t version = nd_get_u32(buf);
+  if (version == 2) {
+    snprintf(err, (size_t)errlen,
+             "rollout: encoding version 2 (object x, y, yaw only), this build reads %d: its "
+             "replay needs the object's full pose; record the rollouts again",
+             ND_ROLLOUT_ENC_VERSION);
+    return -1;
+  }
   if (version != ND_ROLLOUT_ENC_VERSION) {
     snprintf(err, (size_t)errlen, "rollout: encoding version %u, this build reads %d",
              (unsigned)version, ND_ROLLOUT_ENC_VERSION);
@@ -225,7 +268,7 @@ int nd_rollout_decode(nd_rollout *r, const unsigned char *buf, size_t len, char 
     return -1;
   }
   p = nd_get_f64(p, r->u, (size_t)n * 2);
-  p = nd_get_f64(p, r->obj, (size_t)n * 3);
+  p = nd_get_f64(p, r->obj, (size_t)n * ND_ROLLOUT_OBJ);
   p = nd_get_f64(p, r->ee, (size_t)n * 2);
   nd_get_f64(p, r->sp, (size_t)n * 6);
   if (nd_rollout_check(r, err, errlen)) {

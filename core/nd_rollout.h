@@ -11,11 +11,17 @@
  * replay loss rough in theta; replaying the setpoints through the robot's tracking
  * controller keeps the sphere on its path and the loss smooth (sim/nds_replay.h).
  *
- * Encoding (the payload of a replay-buffer record, see nd_rfile.h), version 2, every
+ * The object is observed as motion capture sees it: its full pose, position and
+ * orientation. The loss compares only x, y and yaw (DESIGN.md sec. 4), but the replay puts
+ * the whole observed pose back into the model at every re-anchoring: a sliding box hops on
+ * MuJoCo's soft contact, and a replay that kept its own height and tilt would start each
+ * window from a different hop than the recording did (sim/nds_replay.h).
+ *
+ * Encoding (the payload of a replay-buffer record, see nd_rfile.h), version 3, every
  * field little-endian, doubles as IEEE-754 binary64 bit patterns (bitwise round trip):
  *
  *   offset  size  field
- *        0     4  u32 encoding version (2)
+ *        0     4  u32 encoding version (3)
  *        4     4  i32 n, steps
  *        8     8  i64 task_id
  *       16     8  i64 utime
@@ -30,14 +36,17 @@
  *      200    16  f64 ee_pos[2]
  *      216    16  f64 ee_vel[2]
  *      232  16 n  f64 u[n][2]
- *              24 n  f64 obj[n][3]
+ *              56 n  f64 obj[n][7]
  *              16 n  f64 ee[n][2]
  *              48 n  f64 sp[n][6]
- *   total 232 + 104 n bytes, exactly.
+ *   total 232 + 136 n bytes, exactly.
  *
  * A rollout is valid when n is in [1, ND_ROLLOUT_MAX_STEPS] (the adapter divides by the
- * duration), outcome and control are known values, dt > 0, and every double is finite.
+ * duration), outcome and control are known values, dt > 0, every double is finite, and
+ * every quaternion (obj_quat, obj[i][3..6]) has a norm within ND_ROLLOUT_QUAT_TOL of 1.
  * Encoding refuses an invalid rollout, so nothing a decoder would reject is ever written.
+ * Version 2 (obj[n][3]: x, y, yaw) is refused by name: its records lack the height and
+ * tilt the replay needs, and cannot be re-derived.
  *
  * Changes from the first draft of this header (h9): the encode/decode/check functions
  * and the size constants were added; alloc/free spell out their ownership rules. */
@@ -55,9 +64,11 @@ enum { ND_OUTCOME_SUCCESS = 1, ND_OUTCOME_TIMEOUT = 2, ND_OUTCOME_ABORTED = 3 };
 
 #define ND_ROLLOUT_MAX_STEPS 600000   /* 10 min at 1 kHz: a sanity bound for decoding */
 
-#define ND_ROLLOUT_ENC_VERSION 2
+#define ND_ROLLOUT_ENC_VERSION 3
 #define ND_ROLLOUT_ENC_FIXED 232      /* bytes before the step arrays */
-#define ND_ROLLOUT_ENC_STEP 104       /* bytes per step */
+#define ND_ROLLOUT_ENC_STEP 136       /* bytes per step */
+#define ND_ROLLOUT_OBJ 7              /* obj columns: x, y, z, qw, qx, qy, qz */
+#define ND_ROLLOUT_QUAT_TOL 1e-2      /* |norm - 1| a stored quaternion may have (MOCAP's) */
 
 typedef struct {
   /* metadata */
@@ -74,7 +85,7 @@ typedef struct {
   /* per step i in [0, n): control applied during the step, observation after it */
   int32_t n;
   double *u;              /* n x 2 */
-  double *obj;            /* n x 3: object x, y, yaw */
+  double *obj;            /* n x 7: object position x, y, z, quaternion w, x, y, z */
   double *ee;             /* n x 2: end-effector x, y */
   double *sp;             /* n x 6: commanded setpoint px, py, vx, vy, ax, ay */
 } nd_rollout;
@@ -85,6 +96,13 @@ int nd_rollout_alloc(nd_rollout *r, int n);
 
 /* Free the step arrays; r's metadata stays, n becomes 0, the pointers NULL. */
 void nd_rollout_free(nd_rollout *r);
+
+/* Copy src (metadata and steps) into dst, which receives fresh arrays (its previous
+ * contents are ignored, not freed). Return 0, or -1 (no memory; dst then holds none). */
+int nd_rollout_copy(nd_rollout *dst, const nd_rollout *src);
+
+/* The object's pose after step i (ND_ROLLOUT_OBJ values), i in [0, n). */
+double *nd_rollout_obj(const nd_rollout *r, int i);
 
 /* Duration n * dt, s. */
 double nd_rollout_duration(const nd_rollout *r);

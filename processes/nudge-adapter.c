@@ -57,7 +57,6 @@ typedef struct {
   int replay_mode;            /* NDS_REPLAY_*, -1: the fit configuration's default */
   double replay_window;       /* s, < 0: the fit configuration's default */
   double robust;              /* m^2: CEM ranks by the robust score; 0: by L (nds_fit.h) */
-  int share_hidden;           /* nds_fit_cfg.share_hidden */
 } opts;
 
 static const char *theta_names[NDS_NTHETA] = {"slide", "torsion", "roll", "mass"};
@@ -96,21 +95,16 @@ static void usage(FILE *f) {
           "                     bridge's, 3.5x faster than 0.001 at the same fit)\n"
           "  --replay-mode M    force, velocity or setpoint: how rollouts are replayed\n"
           "                     (default: nds_fit's default; see sim/nds_replay.h)\n"
-          "  --replay-window S  re-anchor each replay on the observations every S s,\n"
-          "                     0..60 (default: nds_fit's, 0.1; 0: one shot, the paper's)\n"
+          "  --replay-window S  re-anchor each replay on the observed pose every S s,\n"
+          "                     0..60 (default: nds_fit's, 0.005; 0: one shot, the paper's)\n"
           "  --robust S         rank candidates by the replay windows' robust score of scale\n"
-          "                     S m^2, 0..1 (default 0: by L, the paper's; 1e-9 is the\n"
-          "                     study's, which fits better but takes ~1.2x as long; README)\n"
-          "  --share-hidden B   1: start every candidate's replay windows from the CEM\n"
-          "                     mean's hidden state (the box's height and tilt), 0: each\n"
-          "                     from its own (default %d; with --robust 1e-9, the study's\n"
-          "                     fit; sim/nds_replay.h)\n"
+          "                     S m^2, 0..1 (default 0: by L, the paper's; sim/nds_fit.c)\n"
           "  --seed N           CEM seed (default 1; a restart adds the history's version)\n"
           "  --lcm-url URL      LCM URL (default: $LCM_DEFAULT_URL, else %s)\n"
           "  -h, --help         this text\n\n"
           "stdout: one line per refit. Exit status: 0 after SIGINT/SIGTERM, 1 on a runtime\n"
           "failure (history locked by another adapter, unreadable), 2 on bad arguments.\n",
-          NDS_FIT_SHARE_HIDDEN_DEFAULT, NDP_DEFAULT_URL);
+          NDP_DEFAULT_URL);
 }
 
 static int parse_fit(const char *s, int fit[NDS_NTHETA], char *err, int errlen) {
@@ -155,7 +149,6 @@ static int parse_opts(int argc, char **argv, opts *o) {
   o->D = 1.0;
   o->seed = 1;
   o->nice = 10;
-  o->share_hidden = NDS_FIT_SHARE_HIDDEN_DEFAULT;
   /* Two record steps per model step: 3.5x faster than 1 ms on the bench's ten 5 s pushes
    * (refit_s_10x5s), and re-anchoring keeps the coarse step's error from compounding, so
    * the fit lands where the 1 ms one does (sliding 1.007 at both). */
@@ -177,7 +170,7 @@ static int parse_opts(int argc, char **argv, opts *o) {
                 !strcmp(a, "--threads") || !strcmp(a, "--nice") ||
                 !strcmp(a, "--replay-dt") || !strcmp(a, "--seed") ||
                 !strcmp(a, "--replay-mode") || !strcmp(a, "--replay-window") ||
-                !strcmp(a, "--robust") || !strcmp(a, "--share-hidden");
+                !strcmp(a, "--robust");
     if (!known) {
       snprintf(err, sizeof(err), "unknown option: %s", a);
       rc = -1;
@@ -201,7 +194,6 @@ static int parse_opts(int argc, char **argv, opts *o) {
     else if (!strcmp(a, "--replay-dt")) rc = nd_parse_double(v, a, 1e-4, 0.01, &o->replay_dt, err, sizeof(err));
     else if (!strcmp(a, "--replay-window")) rc = nd_parse_double(v, a, 0, 60, &o->replay_window, err, sizeof(err));
     else if (!strcmp(a, "--robust")) rc = nd_parse_double(v, a, 0, 1, &o->robust, err, sizeof(err));
-    else if (!strcmp(a, "--share-hidden")) rc = nd_parse_int(v, a, 0, 1, &o->share_hidden, err, sizeof(err));
     else if (!strcmp(a, "--replay-mode")) {
       const int modes[] = {NDS_REPLAY_FORCE, NDS_REPLAY_VELOCITY, NDS_REPLAY_SETPOINT};
       o->replay_mode = -1;
@@ -639,7 +631,6 @@ int main(int argc, char **argv) {
   if (o.replay_mode >= 0) fc.replay.mode = o.replay_mode;
   if (o.replay_window >= 0) fc.replay.window = o.replay_window;
   fc.robust = o.robust;
-  fc.share_hidden = o.share_hidden;
   fc.pop = 32;
   fc.iters = 2;
   fc.elite_frac = 0.2;
@@ -696,13 +687,13 @@ int main(int argc, char **argv) {
   fprintf(stderr,
           PROG ": buffer %s, history %s (%lld entries%s), fit %s, CEM Q %d C %d rho %.2g, "
           "prior D %g on (%g, %g, %g, %g), %s (%.4g, %.4g, %.4g, %.4g) std (%.3g, %.3g, %.3g, "
-          "%.3g), replay %s dt %g s window %g s, ranked by %s, %s hidden state, "
+          "%.3g), replay %s dt %g s window %g s, ranked by %s, "
           "%d worker(s), nice %d, %s\n",
           o.buffer, o.history, (long long)hs.entries, hs.have_last ? ", resuming" : "", fitted,
           fc.pop, fc.iters, fc.elite_frac, o.D, o.ref[0], o.ref[1], o.ref[2], o.ref[3],
           hs.have_last ? "from version" : "prior", m0[0], m0[1], m0[2], m0[3], s0[0], s0[1],
           s0[2], s0[3], nds_replay_mode_name(fc.replay.mode), o.replay_dt, fc.replay.window,
-          rank, fc.share_hidden ? "shared" : "own", o.threads, o.nice,
+          rank, o.threads, o.nice,
           ndp_url(o.url));
   if (hs.have_last)
     fprintf(stderr, PROG ": resuming after version %lld (fit on %d rollout(s) of the buffer "

@@ -48,8 +48,8 @@ static const nd_goal eval_goals[MAX_EVAL] = {
  * box rotates under the sphere (the only motion torsional friction shows in); two are
  * straight pushes, one nearly a turn on the spot. */
 #define NTRAIN 10
-/* The validation loss's resolution: BAND_N models with sliding friction spread evenly
- * over truth (1 +- BAND_DU), never exactly the truth (which replays to L ~ 1e-9). */
+/* The validation loss's scale near the truth: BAND_N models with sliding friction spread
+ * evenly over truth (1 +- BAND_DU), never exactly the truth (which replays to L ~ 1e-19). */
 #define BAND_N 16
 #define BAND_DU 0.01
 static const nd_goal train_goals[NTRAIN] = {
@@ -62,7 +62,6 @@ static const char *pname[NFIT] = {"slide", "torsion", "roll"};
 
 typedef struct {
   int runs, episodes, threads, pop, iters, neval, mode, force, quick, landscape;
-  int share_hidden;  /* the fit's (nds_fit_cfg) */
   double tau, plan_dt, window;
   double step_std, step_gate, rel_floor, k2, robust;  /* the fit's (nds_fit_cfg) */
   uint64_t seed;
@@ -134,8 +133,8 @@ static void usage(FILE *f) {
 "  --tau S          task time limit, s (default 5)\n"
 "  --eval-tasks K   evaluation tasks (the demo's goals), 1..5 (default 5)\n"
 "  --replay MODE    refit replay: force (default) or setpoint (see below)\n"
-"  --window S       refit replay re-anchored on the observations every S s (default\n"
-"                   0.1; 0: one shot from the initial state, the paper's; nds_replay.h)\n"
+"  --window S       refit replay re-anchored on the observed pose every S s (default\n"
+"                   0.005; 0: one shot from the initial state, the paper's; nds_replay.h)\n"
 "  --step-std K     refit CEM: the std at least K times the mean's last step (default\n"
 "                   2; 0: the paper's plain CEM; nds_fit.c)\n"
 "  --step-gate G    refit CEM: --step-std only for steps of at least G sampling stds\n"
@@ -145,11 +144,8 @@ static void usage(FILE *f) {
 "  --rot-weight K2  refit loss: weight of the object's yaw term, m^2/rad, 0..1\n"
 "                   (default 0.001; 0: positions only)\n"
 "  --robust S       refit CEM ranks candidates by each window's L through a Cauchy\n"
-"                   loss of scale S, m^2, 0..1 (default 0: by L, the paper's; 1e-9\n"
-"                   measured best, nds_fit.c). Reported losses are L either way\n"
-"  --share-hidden B refit CEM: 1 starts every candidate's replay windows from the\n"
-"                   iteration mean's hidden state (the box's height and tilt), 0 each\n"
-"                   from its own (default %d; nds_replay.h)\n"
+"                   loss of scale S, m^2, 0..1 (default 0: by L, the paper's;\n"
+"                   nds_fit.c). Reported losses are L either way\n"
 "  --plan-dt S      planning model timestep, s (default 0.005; world and refit: 0.001)\n"
 "  --quick          a preset for a first look, under 10 min on 2 cores: --runs 3\n"
 "                   --episodes 4 --pop 32 --iters 2 --tau 3 (explicit options win)\n"
@@ -159,7 +155,7 @@ static void usage(FILE *f) {
 "                   of each curve, and the robust score (--robust, else 1e-9) beside L\n"
 "                   along sliding friction; first, `lift` lines: how often the pushed\n"
 "                   box stands on fewer than 3 table contacts (MuJoCo's soft contact\n"
-"                   lifts a sliding box), the cause of that loss's roughness\n"
+"                   lifts a sliding box), why re-anchoring puts back its full pose\n"
 "  -h, --help       this text\n\n"
 "Replay modes: force replays the recorded force on the sphere open loop (the paper's\n"
 "simulation); setpoint replays the recorded setpoints through the robot's tracking\n"
@@ -181,9 +177,9 @@ static void usage(FILE *f) {
 "  success_rate_last         mean over runs at the last episode\n"
 "  runs_sliding_within5pct_ep2  runs whose sliding error is below 5%% after episode 2\n"
 "and once: val_loss_band_min/max, the validation loss of %d models whose sliding friction\n"
-"is within +-%g%% of the truth (the rest exact). Contacts make the replay loss rough near\n"
-"the truth, so a loss inside the band cannot tell such a model from a worse one.\n",
-          NDS_FIT_SHARE_HIDDEN_DEFAULT, BAND_N, 100 * BAND_DU);
+"is within +-%g%% of the truth (the rest exact): how low the validation loss gets for\n"
+"models that close.\n",
+          BAND_N, 100 * BAND_DU);
 }
 
 /* ---- options ---- */
@@ -239,7 +235,6 @@ static int parse_args(int argc, char **argv, opts *o) {
     o->rel_floor = fd.rel_floor;
     o->k2 = fd.k2;
     o->robust = fd.robust;
-    o->share_hidden = fd.share_hidden;
   }
   o->D[0] = 0.2, o->D[1] = 1.0, o->nD = 2;
   for (int i = 1; i < argc; i++) {
@@ -254,8 +249,7 @@ static int parse_args(int argc, char **argv, opts *o) {
     static const char *const with_value[] = {
         "--out", "--runs", "--episodes", "--seed", "--threads", "--pop",
         "--iters", "--tau", "--eval-tasks", "--plan-dt", "--d", "--replay", "--window",
-        "--step-std", "--step-gate", "--rel-floor", "--rot-weight", "--robust",
-        "--share-hidden"};
+        "--step-std", "--step-gate", "--rel-floor", "--rot-weight", "--robust"};
     int known = 0;
     for (size_t k = 0; k < sizeof(with_value) / sizeof(with_value[0]); k++)
       known |= !strcmp(a, with_value[k]);
@@ -283,7 +277,6 @@ static int parse_args(int argc, char **argv, opts *o) {
     else if (!strcmp(a, "--rel-floor")) rc = nd_parse_double(v, a, 0, 0.99, &o->rel_floor, err, sizeof(err));
     else if (!strcmp(a, "--rot-weight")) rc = nd_parse_double(v, a, 0, 1, &o->k2, err, sizeof(err));
     else if (!strcmp(a, "--robust")) rc = nd_parse_double(v, a, 0, 1, &o->robust, err, sizeof(err));
-    else if (!strcmp(a, "--share-hidden")) rc = nd_parse_int(v, a, 0, 1, &o->share_hidden, err, sizeof(err));
     else if (!strcmp(a, "--replay")) {
       rc = 0;
       if (!strcmp(v, "setpoint")) o->mode = NDS_REPLAY_SETPOINT;
@@ -364,7 +357,6 @@ static void fit_cfg(const opts *o, int mode, nds_fit_cfg *fc) {
   fc->rel_floor = o->rel_floor;
   fc->k2 = o->k2;
   fc->robust = o->robust;
-  fc->share_hidden = o->share_hidden;
 }
 
 /* "%g" of D with the dot kept out of names: 0.2 -> "0.2", 1.0 -> "1". */
@@ -398,17 +390,6 @@ static int run_task(study *s, const double theta[NDS_NTHETA], uint64_t pseed, co
   return rc;
 }
 
-/* Copy the recorder's rollout into a fresh one the caller owns. */
-static int copy_rollout(nd_rollout *dst, const nd_rollout *src) {
-  nd_rollout t = *src;
-  if (nd_rollout_alloc(&t, src->n)) return -1;
-  memcpy(t.u, src->u, sizeof(double) * 2 * src->n);
-  memcpy(t.obj, src->obj, sizeof(double) * 3 * src->n);
-  memcpy(t.ee, src->ee, sizeof(double) * 2 * src->n);
-  memcpy(t.sp, src->sp, sizeof(double) * 6 * src->n);
-  *dst = t;
-  return 0;
-}
 
 /* Termination time of a task as the paper counts it: success time, else the limit. */
 static double task_time(const study *s, const nds_episode_out *o) {
@@ -739,7 +720,7 @@ static int record_truth(study *s, const nd_goal *g, int n, uint64_t kind, nd_rol
     nds_episode_out o;
     if (run_task(s, nds_theta_true, mix(s->o->seed, kind, (uint64_t)j, 0), &g[j], 1, j, &o, err,
                  errlen) ||
-        copy_rollout(&rs[j], &s->rec.r) || (path && nd_rbuf_append(&w, &rs[j], err, errlen))) {
+        nd_rollout_copy(&rs[j], &s->rec.r) || (path && nd_rbuf_append(&w, &rs[j], err, errlen))) {
       nd_rfile_writer_close(&w);
       if (!err[0]) snprintf(err, errlen, "out of memory");
       return -1;
@@ -877,12 +858,12 @@ static void write_config(const opts *o, int argc, char **argv) {
   for (int i = 0; i < o->nD; i++) fprintf(f, " %g", o->D[i]);
   fprintf(f, "\nseed %llu\nplanner N %d C %d, plan dt %g s\ntau %g s\neval tasks %d\n"
              "refit Q 32 C 2, replay %s, window %g s, step_std %g, step_gate %g, rel_floor %g, "
-             "rot weight %g m^2/rad, robust %g m^2, share hidden %d, world and refit dt "
+             "rot weight %g m^2/rad, robust %g m^2, world and refit dt "
              "0.001 s\n"
              "threads %d\n",
           (unsigned long long)o->seed, o->pop, o->iters, o->plan_dt, o->tau, o->neval,
           nds_replay_mode_name(o->mode), o->window, o->step_std, o->step_gate, o->rel_floor,
-          o->k2, o->robust, o->share_hidden, o->threads);
+          o->k2, o->robust, o->threads);
   fclose(f);
 }
 
@@ -1065,7 +1046,7 @@ static int scripted_push(study *s, int kind, nd_rollout *out, char *err, int err
     nds_record_hook(&s->rec, &s->world, s->d, (const double(*)[4])sp, f);
   }
   if (nds_record_finish(&s->rec, ND_OUTCOME_TIMEOUT, err, errlen) ||
-      copy_rollout(out, &s->rec.r)) {
+      nd_rollout_copy(out, &s->rec.r)) {
     if (!err[0]) snprintf(err, errlen, "out of memory");
     return -1;
   }
@@ -1192,8 +1173,7 @@ static int landscape_run(const opts *o) {
     fprintf(stderr, "  rollout %2d (%s): goal (%+.2f, %+.2f, %+.2f), %.2f s, object moved "
             "%.3f m, turned %+.3f rad\n", i, land_cname[land_class(i)], rs[i].goal[0],
             rs[i].goal[1], rs[i].goal[2], rs[i].n * rs[i].dt,
-            hypot(rs[i].obj[3 * rs[i].n - 3], rs[i].obj[3 * rs[i].n - 2]),
-            rs[i].obj[3 * rs[i].n - 1]);
+            hypot(nd_rollout_obj(&rs[i], rs[i].n - 1)[0], nd_rollout_obj(&rs[i], rs[i].n - 1)[1]), nd_quat_yaw(nd_rollout_obj(&rs[i], rs[i].n - 1) + 3));
   lift_report(&s, rs, nr);
   const int modes[2] = {NDS_REPLAY_FORCE, NDS_REPLAY_SETPOINT};
   for (int k = 0; k < 2; k++) {
@@ -1239,7 +1219,7 @@ static int landscape_run(const opts *o) {
           double Li = nds_replay_loss(&terms[i], wcfg.k1, wcfg.k2);
           fprintf(f, "%s,%s,%.9g,%d,%s,%.4f,%.9g,%.9g,%.9g,%.9g,%d\n",
                   nds_replay_mode_name(modes[k]), pname[p], x[g], i, land_cname[land_class(i)],
-                  rs[i].obj[3 * rs[i].n - 1], Li, terms[i].pos_o, terms[i].pos_ee,
+                  nd_quat_yaw(nd_rollout_obj(&rs[i], rs[i].n - 1) + 3), Li, terms[i].pos_o, terms[i].pos_ee,
                   terms[i].rot_o, terms[i].diverged);
           Lb[3 * g + land_class(i)] += Li;
         }

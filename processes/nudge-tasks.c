@@ -12,8 +12,8 @@
  * ROBOT_STATE (sphere) and MOCAP (object, at rest) when the task is issued, then one step
  * per ROBOT_STATE (the bridge's world step: u = the force the robot applied during it, ee
  * = the sphere after it), sp = the newest EE_CMD handled before that message (the bridge
- * steps on the newest command it holds, which may be one message apart), obj = MOCAP
- * interpolated to the step's time (frames come at 240 Hz, steps at 1 kHz, both stamped
+ * steps on the newest command it holds, which may be one message apart), obj = MOCAP's
+ * pose interpolated to the step's time (frames come at 240 Hz, steps at 1 kHz, both stamped
  * with the world step's time). Messages lost on the way show as gaps in ROBOT_STATE.seq:
  * a gap of up to GAP_FILL_MAX steps is filled by linear interpolation between its two
  * neighbours; a longer one, or more than FILL_MAX_FRAC of the steps filled, and the task
@@ -173,7 +173,7 @@ static int rec_init(recorder *rc, const char *path, double tau, double dt,
   rc->cap = n > ND_ROLLOUT_MAX_STEPS ? ND_ROLLOUT_MAX_STEPS : (int)n;
   rc->step_us = malloc(sizeof(int64_t) * rc->cap);
   rc->frame_us = malloc(sizeof(int64_t) * rc->cap);
-  rc->frame = malloc(sizeof(double) * 3 * rc->cap);
+  rc->frame = malloc(sizeof(double) * ND_ROLLOUT_OBJ * rc->cap);
   if (nd_rollout_alloc(&rc->r, rc->cap) || !rc->step_us || !rc->frame_us || !rc->frame) {
     snprintf(err, errlen, "%s: out of memory for %d steps", path, rc->cap);
     return -1;
@@ -228,10 +228,9 @@ static void rec_frame(recorder *rc, const nudge_mocap_t *m) {
   if (rc->nframes >= rc->cap) return;
   if (rc->nframes > 0 && m->utime <= rc->frame_us[rc->nframes - 1]) return;
   rc->frame_us[rc->nframes] = m->utime;
-  double *f = rc->frame + 3 * rc->nframes;
-  f[0] = m->obj_pos[0];
-  f[1] = m->obj_pos[1];
-  f[2] = nd_quat_yaw(m->obj_quat);
+  double *f = rc->frame + ND_ROLLOUT_OBJ * rc->nframes;
+  memcpy(f, m->obj_pos, 3 * sizeof(double));
+  memcpy(f + 3, m->obj_quat, 4 * sizeof(double));
   rc->nframes++;
 }
 
@@ -334,16 +333,15 @@ static void rec_objects(recorder *rc) {
   for (int i = 0; i < rc->steps; i++) {
     const int64_t t = rc->step_us[i];
     while (j + 1 < rc->nframes && rc->frame_us[j + 1] <= t) j++;
-    const double *a = rc->frame + 3 * j;
-    double *o = rc->r.obj + 3 * i;
+    const double *a = rc->frame + ND_ROLLOUT_OBJ * j;
+    double *o = rc->r.obj + ND_ROLLOUT_OBJ * i;
     if (j + 1 < rc->nframes && rc->frame_us[j] <= t) {
-      const double *b = a + 3;
+      const double *b = a + ND_ROLLOUT_OBJ;
       const double f = (double)(t - rc->frame_us[j]) / (double)(rc->frame_us[j + 1] - rc->frame_us[j]);
-      o[0] = a[0] + f * (b[0] - a[0]);
-      o[1] = a[1] + f * (b[1] - a[1]);
-      o[2] = nd_wrap_angle(a[2] + f * nd_wrap_angle(b[2] - a[2]));
+      for (int c = 0; c < 3; c++) o[c] = a[c] + f * (b[c] - a[c]);
+      nd_quat_nlerp(a + 3, b + 3, f, o + 3);
     } else {
-      memcpy(o, a, 3 * sizeof(double));
+      memcpy(o, a, ND_ROLLOUT_OBJ * sizeof(double));
     }
   }
 }

@@ -28,10 +28,6 @@
  * default (nds_fit_cfg.robust). */
 #define NDS_FIT_ROBUST_SCALE 1e-9
 
-/* nds_fit_cfg.share_hidden's default: off, as the adapter ranks by L, where it does not
- * help (nds_fit.c). */
-#define NDS_FIT_SHARE_HIDDEN_DEFAULT 0
-
 typedef struct {
   int pop, iters;              /* Q >= 2 candidates, C in [1, NDS_FIT_MAX_ITERS] iterations */
   double elite_frac;           /* rho in (0, 1] */
@@ -49,10 +45,6 @@ typedef struct {
   double robust;               /* m^2; > 0: CEM ranks candidates by the windows' robust
                                   score of this scale (nds_replay_bounded); 0: by L, the
                                   paper's. Reported losses are L either way */
-  int share_hidden;            /* 1: each CEM iteration first replays its mean and starts
-                                  every candidate's windows from the mean's hidden state
-                                  (nds_replay.h; one more replay per rollout and
-                                  iteration); 0: each replay keeps its own */
   int prune;                   /* 1: stop replaying a candidate once it cannot be an elite
                                   (same results, less work: see nds_fit.c); 0: replay all */
   nds_replay_cfg replay;       /* how rollouts are replayed (mode, robot controller) */
@@ -62,9 +54,9 @@ typedef struct {
 /* Paper settings: Q 32, C 2, rho 0.2, fitting the three frictions with the mass held;
  * prior at nds_theta_true with the paper's D = 0.2 std; lower 1e-7; k1 = 1,
  * k2 = 1e-3 m^2/rad; prune; seed 1. Beyond the paper (measured in nds_fit.c): step_std 2
- * gated at 0.75 std, std_floor 0.25, rel_floor 0.05, FORCE replay re-anchored every 0.1 s
+ * gated at 0.75 std, std_floor 0.25, rel_floor 0.05, FORCE replay re-anchored every 5 ms
  * with the default controller, candidates ranked by L (robust 0; 1e-9 m^2 ranks better
- * but replays more, nds_fit.c), each replay on its own hidden state (share_hidden 0). */
+ * but replays more, nds_fit.c). */
 void nds_fit_cfg_default(nds_fit_cfg *cfg);
 
 /* Check cfg. Return 0, or -1 naming the bad field. */
@@ -113,8 +105,7 @@ void nds_fit_dist(const nds_fit *f, double mean[NDS_NTHETA], double std[NDS_NTHE
 /* C iterations of CEM on the buffer rs[0, n), then L of the resulting mean (out->flat:
  * the loss did not tell candidates apart and the distribution is unchanged). Every record
  * is checked first (nds_replay_check). Allocates only when n exceeds every earlier
- * buffer (with share_hidden: or the buffer has more re-anchorings in all than any
- * earlier). Return 0, or -1 with a message (distribution unchanged, out untouched). */
+ * buffer. Return 0, or -1 with a message (distribution unchanged, out untouched). */
 int nds_fit_run(nds_fit *f, const nd_rollout *rs, int n, nds_fit_out *out, char *err,
                 int errlen);
 

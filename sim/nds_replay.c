@@ -97,7 +97,7 @@ int nds_replay_check(const nds_model *nm, const nd_rollout *r, char *err, int er
   } f[] = {{"obj_pos", r->obj_pos, 3}, {"obj_quat", r->obj_quat, 4},
            {"obj_vel", r->obj_vel, 6}, {"ee_pos", r->ee_pos, 2},
            {"ee_vel", r->ee_vel, 2},   {"u", r->u, 2 * r->n},
-           {"obj", r->obj, 3 * r->n},  {"ee", r->ee, 2 * r->n},
+           {"obj", r->obj, ND_ROLLOUT_OBJ * r->n},  {"ee", r->ee, 2 * r->n},
            {"sp", r->sp, 6 * r->n}};
   for (size_t i = 0; i < sizeof(f) / sizeof(f[0]); i++) {
     for (int j = 0; j < f[i].n; j++) {
@@ -108,20 +108,22 @@ int nds_replay_check(const nds_model *nm, const nd_rollout *r, char *err, int er
       }
     }
   }
-  const double *qt = r->obj_quat;
-  if (!(qt[0] * qt[0] + qt[1] * qt[1] + qt[2] * qt[2] + qt[3] * qt[3] > 1e-24)) {
-    snprintf(err, errlen, "replay: record obj_quat has zero norm");
-    return -1;
+  /* Re-anchoring normalises the quaternions; one of zero norm has no direction. */
+  for (int i = -1; i < r->n; i++) {
+    const double *qt = i < 0 ? r->obj_quat : r->obj + ND_ROLLOUT_OBJ * i + 3;
+    if (!(qt[0] * qt[0] + qt[1] * qt[1] + qt[2] * qt[2] + qt[3] * qt[3] > 1e-24)) {
+      if (i < 0) snprintf(err, errlen, "replay: record obj_quat has zero norm");
+      else snprintf(err, errlen, "replay: record obj[%d] quaternion has zero norm", i);
+      return -1;
+    }
   }
   return 0;
 }
 
-void nds_replay_observe(const nds_model *nm, const mjData *d, double obj[3], double ee[2]) {
+void nds_replay_observe(const nds_model *nm, const mjData *d, double obj[ND_ROLLOUT_OBJ],
+                        double ee[2]) {
   const mjModel *m = nm->m;
-  const mjtNum *q = d->qpos + nm->obj_qpos;
-  obj[0] = q[0];
-  obj[1] = q[1];
-  obj[2] = nd_quat_yaw(q + 3);
+  memcpy(obj, d->qpos + nm->obj_qpos, ND_ROLLOUT_OBJ * sizeof(double));
   /* The slide joints move the sphere by (qpos - qpos0) from its body position; the same
    * offset nds_state_get applies. */
   for (int k = 0; k < 2; k++)
@@ -145,76 +147,46 @@ void nds_replay_start_put(nd_rollout *r, const nds_state *s) {
   memcpy(r->ee_vel, s->ee_vel, sizeof(s->ee_vel));
 }
 
-/* Observation i of r (object x, y, yaw; sphere x, y); i = -1: the initial state. */
-static void rec_obs(const nd_rollout *r, int i, double obj[3], double ee[2]) {
+/* Observation i of r (object pose, sphere x, y); i = -1: the initial state. */
+static void rec_obs(const nd_rollout *r, int i, double obj[ND_ROLLOUT_OBJ], double ee[2]) {
   if (i < 0) {
-    obj[0] = r->obj_pos[0];
-    obj[1] = r->obj_pos[1];
-    obj[2] = nd_quat_yaw(r->obj_quat);
-    ee[0] = r->ee_pos[0];
-    ee[1] = r->ee_pos[1];
+    memcpy(obj, r->obj_pos, 3 * sizeof(double));
+    memcpy(obj + 3, r->obj_quat, 4 * sizeof(double));
+    memcpy(ee, r->ee_pos, 2 * sizeof(double));
     return;
   }
-  memcpy(obj, r->obj + 3 * i, 3 * sizeof(double));
+  memcpy(obj, r->obj + ND_ROLLOUT_OBJ * i, ND_ROLLOUT_OBJ * sizeof(double));
   memcpy(ee, r->ee + 2 * i, 2 * sizeof(double));
 }
 
-/* Put observation i of r (and its rates from observation i - 1) into d: see re-anchoring
- * in nds_replay.h. */
+/* Put observation i of r, and its rates from observation i - 1, into d: see re-anchoring
+ * in nds_replay.h. MuJoCo's Euler step moves qpos by the new qvel times the step, so the
+ * rates are the difference of two observations over the record's step: exact for a record
+ * taken at the model's step, the mean rate over its last record step otherwise. */
 static void reanchor(const nds_model *nm, mjData *d, const nd_rollout *r, int i) {
   const mjModel *m = nm->m;
-  double o1[3], e1[2], o0[3], e0[2];
+  double o1[ND_ROLLOUT_OBJ], e1[2], o0[ND_ROLLOUT_OBJ], e0[2];
   rec_obs(r, i, o1, e1);
   rec_obs(r, i - 1, o0, e0);
   const double rdt = 1 / r->dt;
   mjtNum *q = d->qpos + nm->obj_qpos, *v = d->qvel + nm->obj_dof;
-  q[0] = o1[0];
-  q[1] = o1[1];
-  /* Turn the model's attitude about world z onto the observed yaw; its tilt stays. */
-  double dq[4], qn[4];
-  nd_yaw_quat(nd_wrap_angle(o1[2] - nd_quat_yaw(q + 3)), dq);
-  mju_mulQuat(qn, dq, q + 3);
-  mju_normalize4(qn);
-  mju_copy4(q + 3, qn);
-  v[0] = (o1[0] - o0[0]) * rdt;
-  v[1] = (o1[1] - o0[1]) * rdt;
-  /* A free joint's angular velocity is in the body frame: set its world z component. */
-  mjtNum R[9], w[3];
-  mju_quat2Mat(R, q + 3);
-  mju_rotVecMat(w, v + 3, R);
-  w[2] = nd_wrap_angle(o1[2] - o0[2]) * rdt;
-  mju_rotVecMatT(v + 3, w, R);
+  mju_copy(q, o1, ND_ROLLOUT_OBJ);
+  mju_normalize4(q + 3);
+  mju_normalize4(o0 + 3);
+  for (int a = 0; a < 3; a++) v[a] = (o1[a] - o0[a]) * rdt;
+  /* A free joint's angular velocity is in the body frame, as mju_subQuat's difference. */
+  mju_subQuat(v + 3, q + 3, o0 + 3);
+  mju_scl3(v + 3, v + 3, rdt);
   for (int a = 0; a < 2; a++) {
     d->qpos[nm->ee_qpos[a]] = e1[a] - m->body_pos[3 * nm->ee_body + a] + m->qpos0[nm->ee_qpos[a]];
     d->qvel[nm->ee_dof[a]] = (e1[a] - e0[a]) * rdt;
   }
 }
 
-/* The object's hidden state (qpos, qvel: what re-anchoring keeps of the model's own) at
- * anchor a: stored into hid_out, then replaced by hid_in's where that holds one. */
-static void hidden(const nds_model *nm, mjData *d, long a, const double *hid_in,
-                   double *hid_out) {
-  mjtNum *q = d->qpos + nm->obj_qpos, *v = d->qvel + nm->obj_dof;
-  if (hid_out) {
-    double *h = hid_out + NDS_REPLAY_HIDDEN * a;
-    memcpy(h, q, 7 * sizeof(double));
-    memcpy(h + 7, v, 6 * sizeof(double));
-  }
-  if (hid_in) {
-    const double *h = hid_in + NDS_REPLAY_HIDDEN * a;
-    for (int i = 0; i < NDS_REPLAY_HIDDEN; i++)
-      if (!isfinite(h[i])) return;  /* the reference did not get here: keep our own */
-    memcpy(q, h, 7 * sizeof(double));
-    memcpy(v, h + 7, 6 * sizeof(double));
-  }
-}
-
-/* Model steps per re-anchoring window at model step mdt (0: never re-anchor), and the
- * re-anchorings of a replay of T model steps: one before each window after the first. */
+/* Model steps per re-anchoring window at model step mdt (0: never re-anchor). */
 static long window_steps(const nds_replay_cfg *cfg, double mdt) {
   return cfg->window > 0 ? lround(fmax(1, cfg->window / mdt)) : 0;
 }
-static long anchors(long T, long W) { return W && T > 0 ? (T - 1) / W : 0; }
 
 static void diverge(nds_replay_terms *out) {
   out->pos_o = out->pos_ee = out->rot_o = out->robust = NDS_REPLAY_DIVERGED;
@@ -225,8 +197,7 @@ static void diverge(nds_replay_terms *out) {
  * windows' score passes bound (never for bound = INFINITY). */
 static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
                   const nd_rollout *r, double k1, double k2, double robust, double bound,
-                  const double *hid_in, double *hid_out, nds_replay_terms *out,
-                  double *pred, char *err, int errlen) {
+                  nds_replay_terms *out, double *pred, char *err, int errlen) {
   memset(out, 0, sizeof(*out)); /* padding too, so terms compare bytewise */
   int k = nds_replay_ratio(nm, r, err, errlen);
   if (k < 0) return -1;
@@ -266,8 +237,6 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
   nds_ctrl_reset(&pid);
   const double mdt = m->opt.timestep;
   const long W = window_steps(cfg, mdt);
-  if (hid_out)
-    for (long i = 0; i < anchors(T, W) * NDS_REPLAY_HIDDEN; i++) hid_out[i] = NAN;
   /* The robust score's windows are the re-anchoring ones (the whole replay is one when not
    * re-anchoring). rs sums the finished windows' log(1 + e_w / robust), ws the running
    * window's weighted errors. e_w divides by the window's full length wlen, known in
@@ -280,10 +249,7 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
   double rs = 0, ws = 0, wcap = robust > 0 ? wlen * robust * expm1(limit) : 0;
   for (; j < T && !diverged && !cut; j++) {
     const int base = j * k;
-    if (W && j > 0 && j % W == 0) {
-      hidden(nm, d, j / W - 1, hid_in, hid_out);
-      reanchor(nm, d, r, base - 1);
-    }
+    if (W && j > 0 && j % W == 0) reanchor(nm, d, r, base - 1);
     const double vel[2] = {d->qvel[dof0], d->qvel[dof1]};
     double f[2];
     if (mode == NDS_REPLAY_SETPOINT) {
@@ -311,16 +277,17 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
       if (d->warning[w].number != WARN_START) diverged = 1;
     if (diverged) break;
 
-    double obj[3], ee[2];
+    double obj[ND_ROLLOUT_OBJ], ee[2];
     nds_replay_observe(nm, d, obj, ee);
-    const double *oo = r->obj + 3 * (base + k - 1), *oe = r->ee + 2 * (base + k - 1);
+    const double *oo = r->obj + ND_ROLLOUT_OBJ * (base + k - 1), *oe = r->ee + 2 * (base + k - 1);
     double dx = obj[0] - oo[0], dy = obj[1] - oo[1];
     double ex = ee[0] - oe[0], ey = ee[1] - oe[1];
     const double po = dx * dx + dy * dy, pe = ex * ex + ey * ey;
     /* The angle between the unit vectors v(phi) and v(phi~), i.e. arccos(v^T v~) in
      * [0, pi], taken as the wrapped difference: arccos near 1 loses half the digits
      * (its floor is ~1e-8 rad where the angles agree exactly). */
-    const double ro = fabs(nd_wrap_angle(obj[2] - oo[2]));
+    const double yaw = nd_quat_yaw(obj + 3);
+    const double ro = fabs(nd_wrap_angle(yaw - nd_quat_yaw(oo + 3)));
     sp += po;
     se += pe;
     sr += ro;
@@ -340,7 +307,7 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
     }
     if (pred) {
       double *row = pred + (size_t)NDS_REPLAY_PRED_COLS * j;
-      row[0] = obj[0], row[1] = obj[1], row[2] = obj[2], row[3] = ee[0], row[4] = ee[1];
+      row[0] = obj[0], row[1] = obj[1], row[2] = yaw, row[3] = ee[0], row[4] = ee[1];
     }
   }
   if (!diverged && !(isfinite(sp) && isfinite(se) && isfinite(sr))) diverged = 1;
@@ -362,21 +329,13 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
 
 int nds_replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg, const nd_rollout *r,
                nds_replay_terms *out, double *pred, char *err, int errlen) {
-  return replay(nm, d, cfg, r, 0, 0, 0, INFINITY, NULL, NULL, out, pred, err, errlen);
+  return replay(nm, d, cfg, r, 0, 0, 0, INFINITY, out, pred, err, errlen);
 }
 
 int nds_replay_bounded(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
                        const nd_rollout *r, double k1, double k2, double robust,
-                       double bound, const double *hid_in, double *hid_out,
-                       nds_replay_terms *out, char *err, int errlen) {
-  return replay(nm, d, cfg, r, k1, k2, robust, bound, hid_in, hid_out, out, NULL, err,
-                errlen);
-}
-
-long nds_replay_anchors(const nds_model *nm, const nds_replay_cfg *cfg, const nd_rollout *r) {
-  char err[160];
-  const int k = nds_replay_ratio(nm, r, err, sizeof(err));
-  return k < 1 ? 0 : anchors(r->n / k, window_steps(cfg, nm->m->opt.timestep));
+                       double bound, nds_replay_terms *out, char *err, int errlen) {
+  return replay(nm, d, cfg, r, k1, k2, robust, bound, out, NULL, err, errlen);
 }
 
 double nds_replay_loss(const nds_replay_terms *t, double k1, double k2) {

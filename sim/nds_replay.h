@@ -9,8 +9,8 @@
  *   SETPOINT  the recorded setpoints sp go through the robot's tracking controller
  *             nds_ctrl_pid, integral reset at the start: closed loop, as the recording
  *             ran. Any record (both kinds carry sp).
- * After each step the model's object (x, y, yaw) and sphere (x, y) are compared with what
- * was observed, giving one rollout's terms of the adaptation loss (DESIGN.md sec. 4):
+ * After each step the model's object (x, y, yaw of its pose) and sphere (x, y) are
+ * compared with what was observed, giving one rollout's terms of the adaptation loss (DESIGN.md sec. 4):
  *
  *   L = L_pos,o + k1 L_pos,ee + k2 L_rot,o, each term 1/T sum over the T compared steps.
  *
@@ -48,16 +48,18 @@ typedef struct {
 } nds_replay_cfg;
 
 /* Re-anchoring (multiple shooting). With window > 0, every window seconds of model time
- * the replay puts what was observed back into the model: the object's x, y, yaw and their
- * rates, the sphere's x, y and velocity (rates as backward differences of the observations
- * one record step apart, which is the velocity an Euler step leaves); the object's height,
- * tilt and their rates and the controller's integral stay the model's own. Each window
- * then scores how far the model strays in window seconds from a state that really
- * happened, so an error does not compound over the rollout: a contact that starts or ends
- * a little earlier under a candidate theta (a discontinuity of the one-shot replay, which
- * makes its loss flat-then-rough near the truth) costs only within its window. At the
- * recording theta the replay stays exact up to rounding and the tilt's effect on yaw. */
-
+ * the replay puts what was observed back into the model: the object's full pose (position
+ * and orientation, as motion capture sees it) and its rates, the sphere's x, y and
+ * velocity (rates as backward differences of the observations one record step apart,
+ * which is the velocity an Euler step leaves); only the controller's integral and the
+ * solver's warm start stay the model's own. Each window then scores how far the model
+ * strays in window seconds from a state that really happened, so an error does not
+ * compound over the rollout: a contact that starts or ends a little earlier under a
+ * candidate theta costs only within its window. The height and tilt matter: MuJoCo's soft
+ * contact lifts a sliding box by up to a millimetre, and when each corner lands again
+ * depends chaotically on theta, so a replay that kept its own height and tilt started
+ * each window from a different hop and its loss was white noise within ~2 % of the truth
+ * (nds_fit.c). At the recording theta the replay stays exact up to rounding. */
 /* mode with the default controller (nds_ctrl_cfg_default), no re-anchoring. */
 void nds_replay_cfg_default(nds_replay_cfg *cfg, int mode);
 
@@ -114,31 +116,16 @@ int nds_replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg, const 
  * of squares, is then mostly those few windows; the log lets every window count. */
 int nds_replay_bounded(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
                        const nd_rollout *r, double k1, double k2, double robust,
-                       double bound, const double *hid_in, double *hid_out,
-                       nds_replay_terms *out, char *err, int errlen);
-
-/* Shared hidden state. Re-anchoring puts back what was observed and keeps the model's own
- * object height, tilt and their rates, which pushing makes chaotic (MuJoCo's soft contact
- * lifts a sliding box, nds_fit.c): two candidates a hair apart start each window from
- * different hops. A replay given hid_out records, at each of its
- * nds_replay_anchors re-anchorings, the object's qpos and qvel as the model had them
- * (NDS_REPLAY_HIDDEN values each; NaN where it did not get, e.g. after diverging); one
- * given hid_in starts each window from those instead of its own (NaN entries: its own),
- * the observed part put back over them as always. Candidates replayed from one reference
- * replay's hidden state then differ only by what theta does within a window. Replaying
- * with the recording theta's own hidden state stays exact. */
-#define NDS_REPLAY_HIDDEN 13
-
-/* Re-anchorings in replaying r in nm as cfg says (0 without re-anchoring or for a record
- * nds_replay_ratio refuses). */
-long nds_replay_anchors(const nds_model *nm, const nds_replay_cfg *cfg, const nd_rollout *r);
+                       double bound, nds_replay_terms *out, char *err, int errlen);
 
 /* L of one rollout's terms: pos_o + k1 pos_ee + k2 rot_o. */
 double nds_replay_loss(const nds_replay_terms *t, double k1, double k2);
 
 /* What a recorder and the replay must agree on, so a replay of the recording model is
- * exact: the observation read from d (object x, y, yaw; sphere x, y) ... */
-void nds_replay_observe(const nds_model *nm, const mjData *d, double obj[3], double ee[2]);
+ * exact: the observation read from d (object pose: x, y, z, quaternion w, x, y, z; sphere
+ * x, y) ... */
+void nds_replay_observe(const nds_model *nm, const mjData *d, double obj[ND_ROLLOUT_OBJ],
+                        double ee[2]);
 
 /* ... the initial state, copied between a record and an nds_state ... */
 void nds_replay_start_get(const nd_rollout *r, nds_state *s);

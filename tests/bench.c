@@ -102,19 +102,16 @@ int main(int argc, char **argv) {
   char err[512];
   int reps = 30;
   double plan_dt = 0.005, robust = NDS_FIT_ROBUST_SCALE;
-  int share = 1;
   for (int i = 1; i < argc; i++) {
     if (!strcmp(argv[i], "-h") || !strcmp(argv[i], "--help")) {
-      printf("usage: nudge-bench [--reps N] [--plan-dt S] [--robust S] [--share-hidden B]\n"
+      printf("usage: nudge-bench [--reps N] [--plan-dt S] [--robust S]\n"
              "Measures raw mj_step rate, batched rollout efficiency on 1 and 2 workers,\n"
              "plan latency at the paper's settings, the planning model's prediction error\n"
              "and the adapter's refit time.\n"
              "  --reps N      plans per latency figure (default 30)\n"
              "  --plan-dt S   planning model timestep (default 0.005)\n"
              "  --robust S    scale of the robust score timed as refit_s_10x5s_robust, m^2,\n"
-             "                (0, 1] (default 1e-9, the study's)\n"
-             "  --share-hidden B  the same refit's shared hidden state, 0 or 1 (default 1,\n"
-             "                the study's)\n");
+             "                (0, 1] (default 1e-9)\n");
       return 0;
     }
     int rc = -1;
@@ -122,8 +119,6 @@ int main(int argc, char **argv) {
       rc = nd_parse_int(argv[++i], "--reps", 3, 10000, &reps, err, sizeof(err));
     else if (i + 1 < argc && !strcmp(argv[i], "--plan-dt"))
       rc = nd_parse_double(argv[++i], "--plan-dt", 1e-4, 0.02, &plan_dt, err, sizeof(err));
-    else if (i + 1 < argc && !strcmp(argv[i], "--share-hidden"))
-      rc = nd_parse_int(argv[++i], "--share-hidden", 0, 1, &share, err, sizeof(err));
     else if (i + 1 < argc && !strcmp(argv[i], "--robust")) {
       rc = nd_parse_double(argv[++i], "--robust", 0, 1, &robust, err, sizeof(err));
       if (!rc && !(robust > 0)) {
@@ -281,9 +276,8 @@ int main(int argc, char **argv) {
    * mode with two record steps per model step, as the adapter runs it (a 2 ms model, whose
    * replay of the true theta is not exact: its L(theta_true) says how far the coarse step
    * strays), in a 1 ms one, in the other replay mode at 1 ms for comparison, and in the
-   * adapter's configuration with the study's fit: ranked by the robust score (--robust;
-   * the study's scale by default, nds_fit.h) from a shared hidden state (--share-hidden,
-   * on by default). */
+   * adapter's configuration ranked by the robust score (--robust; NDS_FIT_ROBUST_SCALE by
+   * default). */
   enum { NREC = 10 };
   nd_rollout recs[NREC];
   for (int i = 0; i < NREC; i++) {
@@ -319,7 +313,6 @@ int main(int argc, char **argv) {
       nds_fit_cfg_default(&cfg);
       cfg.replay.mode = fit_mode[k];
       cfg.robust = fit_robust[k];
-      if (k == 3) cfg.share_hidden = share;
       nd_rng rr;
       nd_rng_seed(&rr, 1, 7);
       nds_fit_paper_prior(nds_theta_true, 1.0, cfg.lower, &rr, cfg.mu0, cfg.sigma0);
@@ -341,11 +334,11 @@ int main(int argc, char **argv) {
       refit_s[k] = now_s() - t0;
       if (k == 0) rep_s[rep] = refit_s[k];
       printf("refit %d x 5 s, Q %d C %d, 2 workers, %s replay%s, model dt %.3f s, robust "
-             "%g, share hidden %d: %.2f s (%d replays), sliding %.3f -> %.3f, L(mean) %.3g, "
+             "%g: %.2f s (%d replays), sliding %.3f -> %.3f, L(mean) %.3g, "
              "L(theta_true) %.3g\n",
              NREC, cfg.pop, cfg.iters, nds_replay_mode_name(fit_mode[k]),
              k == 0 ? " (the adapter's default)" : "", fit_dt[k], cfg.robust,
-             cfg.share_hidden, refit_s[k],
+             refit_s[k],
              fo.replays,
              cfg.mu0[0], fo.mean[0], fo.loss_mean, l_true);
       nds_fit_free(fit);

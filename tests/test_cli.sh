@@ -191,7 +191,6 @@ num_cases nudge-adapter --prior-d 0
 num_cases nudge-adapter --replay-dt 1
 num_cases nudge-adapter --replay-window -1
 num_cases nudge-adapter --robust 2
-int_cases nudge-adapter --share-hidden 2
 bad nudge-adapter "--threads|out of range" --replay-window 0 --threads 0
 seed_cases nudge-adapter --seed
 theta_cases nudge-adapter --theta
@@ -262,7 +261,6 @@ num_cases nudge-experiment --step-gate -1
 num_cases nudge-experiment --rel-floor 1
 num_cases nudge-experiment --rot-weight 2
 num_cases nudge-experiment --robust 2
-int_cases nudge-experiment --share-hidden 2
 # A good --window is taken (the refusal is the next option's).
 bad nudge-experiment "--runs|out of range" --window 0 --runs 0
 bad nudge-experiment "--d|out of range" --d 0,1

@@ -88,6 +88,33 @@ static void test_yaw_of_composed(void **state) {
   assert_near(nd_quat_yaw(qc), 2.5, 1e-12);
 }
 
+/* nlerp between two yaws moves along the shorter arc, also when one quaternion has the
+ * other sign (the same rotation), ends exactly at its endpoints, and stays unit. */
+static void test_quat_nlerp(void **state) {
+  (void)state;
+  double a[4], b[4], q[4];
+  nd_yaw_quat(0.1, a);
+  nd_yaw_quat(0.3, b);
+  for (int s = 0; s < 2; s++) {
+    if (s)
+      for (int i = 0; i < 4; i++) b[i] = -b[i];
+    nd_quat_nlerp(a, b, 0.5, q);
+    assert_near(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3], 1.0, 1e-15);
+    assert_near(nd_quat_yaw(q), 0.2, 1e-12);
+    nd_quat_nlerp(a, b, 0.25, q);
+    assert_near(nd_quat_yaw(q), 0.15, 1e-4); /* nlerp is not uniform in angle, nearly so */
+    nd_quat_nlerp(a, b, 0, q);
+    assert_memory_equal(q, a, sizeof(q));
+    nd_quat_nlerp(a, b, 1, q);
+    assert_near(ang_diff(nd_quat_yaw(q), 0.3), 0, 1e-15);
+  }
+  /* Across +-pi: 3.1 to -3.1 goes the 0.08 rad way through pi, not back through 0. */
+  nd_yaw_quat(3.1, a);
+  nd_yaw_quat(-3.1, b);
+  nd_quat_nlerp(a, b, 0.5, q);
+  assert_near(fabs(nd_quat_yaw(q)), ND_PI, 1e-12);
+}
+
 static void test_vec_helpers(void **state) {
   (void)state;
   const double v[2] = {3.0, -4.0}, a[2] = {1.0, 1.0}, b[2] = {4.0, 5.0};
@@ -114,7 +141,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_wrap_edges),      cmocka_unit_test(test_wrap_range_sweep),
       cmocka_unit_test(test_yaw_quat_round_trip), cmocka_unit_test(test_yaw_of_composed),
-      cmocka_unit_test(test_vec_helpers),
+      cmocka_unit_test(test_quat_nlerp),      cmocka_unit_test(test_vec_helpers),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

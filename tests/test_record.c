@@ -4,6 +4,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "nd_math.h"
 #include "nd_test.h"
 #include "nds_episode.h"
 #include "nds_tfx.h"
@@ -64,8 +65,9 @@ static void test_record_replays_exactly(void **state) {
   assert_int_equal(nds_record_finish(&rec, o.reached ? ND_OUTCOME_SUCCESS : ND_OUTCOME_TIMEOUT,
                                      err, sizeof(err)), 0);
   const nd_rollout *r = &rec.r;
+  const double *last = nd_rollout_obj(r, r->n - 1);
   printf("recorded %d steps (t_end %.3f s), object moved to (%.3f, %.3f, %.3f)\n", r->n,
-         o.t_end, r->obj[3 * (r->n - 1)], r->obj[3 * (r->n - 1) + 1], r->obj[3 * r->n - 1]);
+         o.t_end, last[0], last[1], nd_quat_yaw(last + 3));
   assert_int_equal(r->n, (int)lround(o.t_end / 0.001));
   assert_int_equal(r->task_id, 42);
   assert_true(r->goal[0] == g.x && r->goal[1] == g.y && r->goal[2] == g.yaw);
@@ -74,8 +76,12 @@ static void test_record_replays_exactly(void **state) {
   assert_int_equal(r->outcome, o.reached ? ND_OUTCOME_SUCCESS : ND_OUTCOME_TIMEOUT);
   assert_true(r->dt == 0.001);
   assert_true(r->ee_pos[0] == -0.10 && r->sp[0] == -0.10 && r->sp[1] == 0.0);
-  assert_true(hypot(r->obj[3 * (r->n - 1)], r->obj[3 * (r->n - 1) + 1]) > 0.03);  /* pushed */
-  assert_true(fabs(r->obj[3 * r->n - 1]) > 0.05);                                 /* turned */
+  assert_true(hypot(last[0], last[1]) > 0.03);     /* pushed */
+  assert_true(fabs(nd_quat_yaw(last + 3)) > 0.05); /* turned */
+  for (int k = 0; k < r->n; k++) {
+    const double *q = nd_rollout_obj(r, k) + 3; /* the full pose, a unit quaternion */
+    assert_near(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3], 1, 1e-12);
+  }
 
   nds_model nm;
   assert_int_equal(nds_model_copy(&nm, &f->x.world, err, sizeof(err)), 0);
@@ -90,7 +96,9 @@ static void test_record_replays_exactly(void **state) {
     assert_int_equal(t.steps, r->n);
     assert_true(t.pos_o == 0 && t.pos_ee == 0 && t.rot_o == 0 && !t.diverged);
     for (int k = 0; k < r->n; k++) {
-      assert_memory_equal(pred + 5 * k, r->obj + 3 * k, 3 * sizeof(double));
+      const double *o = nd_rollout_obj(r, k), yaw = nd_quat_yaw(o + 3);
+      assert_memory_equal(pred + 5 * k, o, 2 * sizeof(double));
+      assert_memory_equal(pred + 5 * k + 2, &yaw, sizeof(double));
       assert_memory_equal(pred + 5 * k + 3, r->ee + 2 * k, 2 * sizeof(double));
     }
   }

@@ -8,6 +8,7 @@
 #include "nd_test.h"
 
 #include <errno.h>
+#include <math.h>
 #include <fcntl.h>
 #include <ftw.h>
 #include <pthread.h>
@@ -45,6 +46,13 @@ static uint64_t rnd_next(uint64_t *s) {
 
 static double rnd_unit(uint64_t *s) { return (double)(rnd_next(s) >> 11) * 0x1p-53 * 2 - 1; }
 
+/* A random unit quaternion (a rollout refuses others). */
+static void unit_quat(double q[4], uint64_t *s) {
+  double n = 0;
+  for (int i = 0; i < 4; i++) q[i] = rnd_unit(s) + (i == 0 ? 2 : 0), n += q[i] * q[i];
+  for (int i = 0; i < 4; i++) q[i] /= sqrt(n);
+}
+
 /* A valid rollout of n steps; includes -0.0 and a subnormal so "bitwise" means bitwise. */
 static void make_rollout(nd_rollout *r, int n, uint64_t seed) {
   uint64_t s = seed * 0x9E3779B97F4A7C15ULL + 1;
@@ -59,11 +67,15 @@ static void make_rollout(nd_rollout *r, int n, uint64_t seed) {
   const double theta[4] = {1, 0.005, 1e-4, 0.5};
   memcpy(r->theta, theta, sizeof theta);
   for (int i = 0; i < 3; i++) r->obj_pos[i] = rnd_unit(&s);
-  for (int i = 0; i < 4; i++) r->obj_quat[i] = rnd_unit(&s);
+  unit_quat(r->obj_quat, &s);
   for (int i = 0; i < 6; i++) r->obj_vel[i] = rnd_unit(&s);
   for (int i = 0; i < 2; i++) r->ee_pos[i] = rnd_unit(&s), r->ee_vel[i] = rnd_unit(&s);
   for (int i = 0; i < 2 * n; i++) r->u[i] = rnd_unit(&s) * 20;
-  for (int i = 0; i < 3 * n; i++) r->obj[i] = rnd_unit(&s);
+  for (int k = 0; k < n; k++) {
+    double *o = nd_rollout_obj(r, k);
+    for (int i = 0; i < 3; i++) o[i] = rnd_unit(&s);
+    unit_quat(o + 3, &s);
+  }
   for (int i = 0; i < 2 * n; i++) r->ee[i] = rnd_unit(&s);
   for (int i = 0; i < 6 * n; i++) r->sp[i] = rnd_unit(&s);
   r->u[0] = -0.0;
@@ -88,7 +100,7 @@ static void assert_rollout_equal(const nd_rollout *a, const nd_rollout *b) {
   assert_true(same_bits(a->ee_pos, b->ee_pos, sizeof a->ee_pos));
   assert_true(same_bits(a->ee_vel, b->ee_vel, sizeof a->ee_vel));
   assert_true(same_bits(a->u, b->u, (size_t)a->n * 2 * 8));
-  assert_true(same_bits(a->obj, b->obj, (size_t)a->n * 3 * 8));
+  assert_true(same_bits(a->obj, b->obj, (size_t)a->n * ND_ROLLOUT_OBJ * 8));
   assert_true(same_bits(a->ee, b->ee, (size_t)a->n * 2 * 8));
   assert_true(same_bits(a->sp, b->sp, (size_t)a->n * 6 * 8));
 }
@@ -213,7 +225,7 @@ static void test_encoding_round_trip_and_layout(void **state) {
   nd_rollout r, d;
   make_rollout(&r, 37, 5);
   const size_t size = nd_rollout_encoded_size(37);
-  assert_int_equal(size, 232 + 104 * 37);
+  assert_int_equal(size, 232 + 136 * 37);
   unsigned char *buf = malloc(size);
   size_t len = 0;
   assert_int_equal(nd_rollout_encode(&r, buf, size - 1, &len, err, sizeof err), -1);
@@ -221,7 +233,7 @@ static void test_encoding_round_trip_and_layout(void **state) {
   assert_int_equal(nd_rollout_encode(&r, buf, size, &len, err, sizeof err), 0);
   assert_int_equal(len, size);
   /* Little-endian at the documented offsets, whatever the host. */
-  const unsigned char head[8] = {2, 0, 0, 0, 37, 0, 0, 0};
+  const unsigned char head[8] = {3, 0, 0, 0, 37, 0, 0, 0};
   assert_memory_equal(buf, head, 8);
   unsigned char want[8];
   put_f64(want, r.dt);
@@ -230,10 +242,12 @@ static void test_encoding_round_trip_and_layout(void **state) {
   assert_memory_equal(buf + 224, want, 8);
   put_f64(want, r.u[1]);
   assert_memory_equal(buf + 240, want, 8);
+  put_f64(want, r.obj[7 * 36 + 6]); /* the last step's quaternion z */
+  assert_memory_equal(buf + 232 + 72 * 37 - 8, want, 8);
   put_f64(want, r.ee[2 * 37 - 1]);
-  assert_memory_equal(buf + 232 + 56 * 37 - 8, want, 8);
+  assert_memory_equal(buf + 232 + 88 * 37 - 8, want, 8);
   put_f64(want, r.sp[0]);
-  assert_memory_equal(buf + 232 + 56 * 37, want, 8);
+  assert_memory_equal(buf + 232 + 88 * 37, want, 8);
   put_f64(want, r.sp[6 * 37 - 1]);
   assert_memory_equal(buf + size - 8, want, 8);
   assert_int_equal(nd_rollout_decode(&d, buf, len, err, sizeof err), 0);
@@ -276,10 +290,10 @@ static void test_decode_rejects(void **state) {
   char err[256];
   nd_rollout r;
   make_rollout(&r, STEPS, 9);
-  unsigned char good[232 + 104 * STEPS];
+  unsigned char good[232 + 136 * STEPS];
   size_t len;
   assert_int_equal(nd_rollout_encode(&r, good, sizeof good, &len, err, sizeof err), 0);
-  const int u0 = 232, obj0 = 232 + 16 * STEPS, ee0 = 232 + 40 * STEPS, sp0 = 232 + 56 * STEPS;
+  const int u0 = 232, obj0 = 232 + 16 * STEPS, ee0 = 232 + 72 * STEPS, sp0 = 232 + 88 * STEPS;
   /* not finite, named by field and index */
   expect_reject(good, len, 0, p_nan_at, 32, "dt");
   expect_reject(good, len, 0, p_nan_at, 48, "goal[1]");
@@ -288,7 +302,11 @@ static void test_decode_rejects(void **state) {
   expect_reject(good, len, 0, p_nan_at, 152 + 40, "obj_vel[5]");
   expect_reject(good, len, 0, p_nan_at, 216, "ee_vel[0]");
   expect_reject(good, len, 0, p_nan_at, u0 + (2 * 4 + 1) * 8, "u[4][1]");
-  expect_reject(good, len, 0, p_inf_at, obj0 + (3 * (STEPS - 1) + 2) * 8, "obj[8][2]");
+  expect_reject(good, len, 0, p_inf_at, obj0 + (7 * (STEPS - 1) + 2) * 8, "obj[8][2]");
+  expect_reject(good, len, 0, p_nan_at, obj0 + (7 * 4 + 6) * 8, "obj[4][6]");
+  /* quaternions must be unit ones (within 1e-2: what MOCAP accepts) */
+  expect_reject(good, len, 0, p_f64_zero, obj0 + (7 * 2 + 3) * 8, "obj quaternion[2]");
+  expect_reject(good, len, 0, p_f64_neg, 120, "obj_quat = ");
   expect_reject(good, len, 0, p_nan_at, ee0, "ee[0][0]");
   expect_reject(good, len, 0, p_inf_at, sp0 + (6 * 3 + 4) * 8, "sp[3][4]");
   /* dt must be a positive step */
@@ -309,7 +327,9 @@ static void test_decode_rejects(void **state) {
   expect_reject(good, len, 0, p_u32, 24 << 24 | 0, "outcome = 0");
   expect_reject(good, len, 0, p_u32, 28 << 24 | 2, "control = 2");
   expect_reject(good, len, 0, p_u32, 0 << 24 | 1, "version 1");
-  expect_reject(good, len, 0, p_u32, 0 << 24 | 3, "version 3");
+  expect_reject(good, len, 0, p_u32, 0 << 24 | 4, "version 4");
+  /* the previous layout, named: its records lack the pose the replay needs */
+  expect_reject(good, len, 0, p_u32, 0 << 24 | 2, "version 2 (object x, y, yaw only)");
   /* the encoder refuses what the decoder would */
   r.u[5] = NAN;
   assert_int_equal(nd_rollout_encode(&r, good, sizeof good, &len, err, sizeof err), -1);
@@ -373,7 +393,7 @@ static void test_file_round_trip(void **state) {
   /* A rollout the decoder would reject is never appended. */
   assert_int_equal(nd_rbuf_open(&w, path, NULL, err, sizeof err), 0);
   const int64_t end = w.end;
-  rs[1].obj[4] = NAN;
+  rs[1].obj[8] = NAN;
   assert_int_equal(nd_rbuf_append(&w, &rs[1], err, sizeof err), -1);
   assert_non_null(strstr(err, "obj[1][1]"));
   assert_non_null(strstr(err, path));
@@ -390,7 +410,7 @@ static void test_undecodable_record(void **state) {
   unlink(path);
   nd_rollout r;
   make_rollout(&r, 4, 3);
-  unsigned char b[232 + 104 * 4];
+  unsigned char b[232 + 136 * 4];
   size_t len;
   assert_int_equal(nd_rollout_encode(&r, b, sizeof b, &len, err, sizeof err), 0);
   nd_rfile_writer w;

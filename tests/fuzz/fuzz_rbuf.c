@@ -235,6 +235,7 @@ static void fz_make_one(void) {
   r.control = ND_CTRL_FORCE;
   r.dt = 1e-3;
   r.obj_quat[0] = 1.0;
+  r.obj[3] = 1.0; /* the pose after the step: a unit quaternion */
   size_t len;
   char why[256];
   FZ_CHECK(nd_rollout_encode(&r, fz_one, sizeof fz_one, &len, why, sizeof why) == 0 &&

@@ -6,6 +6,7 @@
  * message of each LCM type, a history entry, and goal files. */
 #define _GNU_SOURCE
 #include <errno.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -54,8 +55,11 @@ static void rollout(nd_rollout *r, int n, int64_t task) {
   r->ee_pos[0] = -0.08;
   for (int i = 0; i < n; i++) {
     r->u[2 * i] = 0.5;
-    r->obj[3 * i] = 1e-4 * i;
-    r->obj[3 * i + 2] = 2e-4 * i;
+    double *o = nd_rollout_obj(r, i); /* along x, turning slowly */
+    o[0] = 1e-4 * i;
+    o[2] = 0.025;
+    o[3] = cos(1e-4 * i);
+    o[6] = sin(1e-4 * i);
     r->ee[2 * i] = -0.08 + 1e-3 * i;
     r->sp[6 * i] = -0.08 + 1e-3 * (i + 1);
     r->sp[6 * i + 2] = 1.0;
