@@ -199,6 +199,7 @@ struct nds_fit {
   int *order;           /* cand_cap: candidates in the order their replays are handed out */
   int ntop;
   int nrun;             /* replays run in the batch */
+  int r0, nrp;          /* this pass replays rollouts [r0, r0 + nrp) of each candidate */
   int lock_init;
 
   double cost_lo, cost_hi; /* finite candidate costs of the current run */
@@ -477,7 +478,7 @@ static double score(const nds_fit *f, const nds_replay_terms *t) {
  * depend on the timing that decides what gets pruned. */
 static void replay_task(void *ctx, int task, int worker) {
   nds_fit *f = ctx;
-  int c = f->order[task / f->nr], r = task % f->nr;
+  int c = f->order[task / f->nrp], r = f->r0 + task % f->nrp;
   nds_replay_terms *out = &f->terms[(size_t)c * f->nr + r];
   double bound = INFINITY;
   pthread_mutex_lock(&f->lock);
@@ -536,6 +537,19 @@ oom:
   return -1;
 }
 
+/* Sort f->order[0, ncand) by f->done, ascending (insertion sort: stable, and ncand is a
+ * population). */
+static void order_by_done(nds_fit *f, int ncand) {
+  for (int i = 1; i < ncand; i++) {
+    int v = f->order[i], j = i - 1;
+    while (j >= 0 && f->done[f->order[j]] > f->done[v]) {
+      f->order[j + 1] = f->order[j];
+      j--;
+    }
+    f->order[j + 1] = v;
+  }
+}
+
 /* Replay f->theta[0, ncand) on the current buffer; loss[c] sums each candidate's rollout
  * scores in buffer order, so the result does not depend on which worker ran what. The
  * score is the robust one with robust > 0, else L. prune: a CEM iteration, pruned as
@@ -563,17 +577,24 @@ static void eval_batch(nds_fit *f, int ncand, int prune, double robust, double *
       }
       f->done[c] = d2;  /* scratch until the pool runs */
     }
-    for (int i = 1; i < ncand; i++) {
-      int v = f->order[i], j = i - 1;
-      while (j >= 0 && f->done[f->order[j]] > f->done[v]) {
-        f->order[j + 1] = f->order[j];
-        j--;
-      }
-      f->order[j + 1] = v;
-    }
+    order_by_done(f, ncand);
     for (int c = 0; c < ncand; c++) f->done[c] = 0;
   }
-  nd_pool_run(f->pool, ncand * f->nr, replay_task, f);
+  if (f->bounded && f->nr > 1) {
+    /* Two passes: every candidate's first rollout, then the rest in the order of that
+     * first score. The candidates likely to be elites then complete first, and the bound
+     * is tight while most of the others still have rollouts to go (a smooth L ranks on
+     * one rollout nearly as on all). nudge-bench's 10 x 5 s refit: 572 replays started in
+     * one pass (11.20 s), 532 in two (9.71 s). */
+    f->r0 = 0, f->nrp = 1;
+    nd_pool_run(f->pool, ncand, replay_task, f);
+    order_by_done(f, ncand);
+    f->r0 = 1, f->nrp = f->nr - 1;
+    nd_pool_run(f->pool, ncand * f->nrp, replay_task, f);
+  } else {
+    f->r0 = 0, f->nrp = f->nr;
+    nd_pool_run(f->pool, ncand * f->nr, replay_task, f);
+  }
   for (int c = 0; c < ncand; c++) {
     double L = 0;
     for (int r = 0; r < f->nr; r++) L += score(f, &f->terms[(size_t)c * f->nr + r]);

@@ -93,7 +93,7 @@ static int record_push5(const nds_model *w, mjData *d, int i, nd_rollout *r) {
     d->qfrc_applied[w->ee_dof[0]] = r->u[2 * k];
     d->qfrc_applied[w->ee_dof[1]] = r->u[2 * k + 1];
     mj_step(w->m, d);
-    nds_replay_observe(w, d, r->obj + 3 * k, r->ee + 2 * k);
+    nds_replay_observe(w, d, nd_rollout_obj(r, k), r->ee + 2 * k);
   }
   return 0;
 }
