@@ -55,7 +55,7 @@ typedef struct {
   int nice;
   double replay_dt;           /* model timestep of the replays, s */
   int replay_mode;            /* NDS_REPLAY_*, -1: the fit configuration's default */
-  double replay_window;       /* s, < 0: the fit configuration's default */
+  double replay_window;       /* s, < 0: NDS_FIT_WINDOW_MOCAP */
   double robust;              /* m^2: CEM ranks by the robust score; 0: by L (nds_fit.h) */
 } opts;
 
@@ -96,7 +96,9 @@ static void usage(FILE *f) {
           "  --replay-mode M    force, velocity or setpoint: how rollouts are replayed\n"
           "                     (default: nds_fit's default; see sim/nds_replay.h)\n"
           "  --replay-window S  re-anchor each replay on the observed pose every S s,\n"
-          "                     0..60 (default: nds_fit's, 0.005; 0: one shot, the paper's)\n"
+          "                     0..60 (default 0.1, for poses interpolated from 240 Hz\n"
+          "                     MOCAP; 0.005 for poses observed every step, as the study's;\n"
+          "                     0: one shot, the paper's; sim/nds_fit.h)\n"
           "  --robust S         rank candidates by the replay windows' robust score of scale\n"
           "                     S m^2, 0..1 (default 0: by L, the paper's; sim/nds_fit.c)\n"
           "  --seed N           CEM seed (default 1; a restart adds the history's version)\n"
@@ -629,7 +631,7 @@ int main(int argc, char **argv) {
   nds_fit_cfg fc;
   nds_fit_cfg_default(&fc);
   if (o.replay_mode >= 0) fc.replay.mode = o.replay_mode;
-  if (o.replay_window >= 0) fc.replay.window = o.replay_window;
+  fc.replay.window = o.replay_window >= 0 ? o.replay_window : NDS_FIT_WINDOW_MOCAP;
   fc.robust = o.robust;
   fc.pop = 32;
   fc.iters = 2;

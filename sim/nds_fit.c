@@ -37,7 +37,8 @@
  *   window 0.1 s   37/40   48.0 -> 47.3 %      window 0.01 s   37/40   48.0 -> 36.9 %
  *   window 0.02 s  32/40   48.0 -> 39.9 %      window 0.005 s  39/40   48.0 -> 34.1 %
  *   window 0.002 s 39/40   48.0 -> 32.0 %
- * 0.005 s keeps a few model steps per window at the adapter's 2 ms model too. The
+ * 0.005 s keeps a few model steps per window at a 2 ms model too (the adapter uses
+ * NDS_FIT_WINDOW_MOCAP for its interpolated motion-capture records, nds_fit.h). The
  * validation loss fell in all 160 of those runs' windows below 0.1 s (one rise at 0.1 s).
  * Plain CEM (step_std 0) at 0.01 s: 4/10 on seed 1, so the step rules below still matter.
  * The robust score, built for the rough loss, is not needed: at 0.01 s, 26/29 (its scale
