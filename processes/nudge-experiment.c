@@ -1074,7 +1074,7 @@ static double land_x(int p, int g) {
   return fmax(1e-7, nds_theta_true[p] * u);
 }
 
-/* How pushing lifts the box, the cause of the loss's chaos floor (nds_fit.c). MuJoCo's
+/* How pushing lifts the box, why re-anchoring puts back its full pose (nds_fit.c). MuJoCo's
  * soft contact lets a box that slides rise off the table (a sliding contact separates at a
  * rate that grows with its slip), so while pushed it hops on fewer than its four corners
  * and each landing's timing moves with theta. Each rollout is replayed once under the
