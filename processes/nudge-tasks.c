@@ -88,7 +88,7 @@ typedef struct {
   nd_rollout r;          /* r.n is the capacity except during the append */
   int64_t *step_us;      /* cap: each step's utime */
   int64_t *frame_us;     /* cap: the task's MOCAP frames ... */
-  double *frame;         /* cap x 3: ... object x, y, yaw */
+  double *frame;         /* cap x ND_ROLLOUT_OBJ: ... object pose */
   int nframes;
   int on;                /* recording a task now */
   int steps;
