@@ -149,8 +149,7 @@ int nd_rollout_check(const nd_rollout *r, char *err, int errlen) {
       nd_rollout_check_quat(r->obj_quat, "obj_quat", -1, err, errlen))
     return -1;
   for (int i = 0; i < r->n; i++)
-    if (nd_rollout_check_quat(r->obj + ND_ROLLOUT_OBJ * i + 3, "obj quaternion", i, err,
-                              errlen))
+    if (nd_rollout_check_quat(nd_rollout_obj(r, i) + 3, "obj quaternion", i, err, errlen))
       return -1;
   return 0;
 }

@@ -14,7 +14,7 @@
  * --landscape instead records the training tasks with the true theta and writes the loss
  * along each friction for the FORCE and SETPOINT replay modes (how the default replay
  * mode and what torsional friction needs were chosen), after a report of how far pushing
- * lifts the box off the table (why that loss is rough). */
+ * lifts the box off the table (why re-anchoring puts back the box's full pose). */
 #include <errno.h>
 #include <math.h>
 #include <stdio.h>
@@ -1169,11 +1169,13 @@ static int landscape_run(const opts *o) {
     if (scripted_push(&s, k, &rs[nr], err, sizeof(err))) goto done;
     nr++;
   }
-  for (int i = 0; i < nr; i++)
+  for (int i = 0; i < nr; i++) {
+    const double *e = nd_rollout_obj(&rs[i], rs[i].n - 1);
     fprintf(stderr, "  rollout %2d (%s): goal (%+.2f, %+.2f, %+.2f), %.2f s, object moved "
             "%.3f m, turned %+.3f rad\n", i, land_cname[land_class(i)], rs[i].goal[0],
-            rs[i].goal[1], rs[i].goal[2], rs[i].n * rs[i].dt,
-            hypot(nd_rollout_obj(&rs[i], rs[i].n - 1)[0], nd_rollout_obj(&rs[i], rs[i].n - 1)[1]), nd_quat_yaw(nd_rollout_obj(&rs[i], rs[i].n - 1) + 3));
+            rs[i].goal[1], rs[i].goal[2], rs[i].n * rs[i].dt, hypot(e[0], e[1]),
+            nd_quat_yaw(e + 3));
+  }
   lift_report(&s, rs, nr);
   const int modes[2] = {NDS_REPLAY_FORCE, NDS_REPLAY_SETPOINT};
   for (int k = 0; k < 2; k++) {
@@ -1217,10 +1219,10 @@ static int landscape_run(const opts *o) {
         Lb[3 * g] = Lb[3 * g + 1] = Lb[3 * g + 2] = 0;
         for (int i = 0; i < nr; i++) {
           double Li = nds_replay_loss(&terms[i], wcfg.k1, wcfg.k2);
+          const double turn = nd_quat_yaw(nd_rollout_obj(&rs[i], rs[i].n - 1) + 3);
           fprintf(f, "%s,%s,%.9g,%d,%s,%.4f,%.9g,%.9g,%.9g,%.9g,%d\n",
                   nds_replay_mode_name(modes[k]), pname[p], x[g], i, land_cname[land_class(i)],
-                  nd_quat_yaw(nd_rollout_obj(&rs[i], rs[i].n - 1) + 3), Li, terms[i].pos_o, terms[i].pos_ee,
-                  terms[i].rot_o, terms[i].diverged);
+                  turn, Li, terms[i].pos_o, terms[i].pos_ee, terms[i].rot_o, terms[i].diverged);
           Lb[3 * g + land_class(i)] += Li;
         }
       }

@@ -334,7 +334,7 @@ static void rec_objects(recorder *rc) {
     const int64_t t = rc->step_us[i];
     while (j + 1 < rc->nframes && rc->frame_us[j + 1] <= t) j++;
     const double *a = rc->frame + ND_ROLLOUT_OBJ * j;
-    double *o = rc->r.obj + ND_ROLLOUT_OBJ * i;
+    double *o = nd_rollout_obj(&rc->r, i);
     if (j + 1 < rc->nframes && rc->frame_us[j] <= t) {
       const double *b = a + ND_ROLLOUT_OBJ;
       const double f = (double)(t - rc->frame_us[j]) / (double)(rc->frame_us[j + 1] - rc->frame_us[j]);

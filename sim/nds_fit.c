@@ -41,8 +41,8 @@
  * NDS_FIT_WINDOW_MOCAP for its interpolated motion-capture records, nds_fit.h). The
  * validation loss fell in all 160 of those runs' windows below 0.1 s (one rise at 0.1 s).
  * Plain CEM (step_std 0) at 0.01 s: 4/10 on seed 1, so the step rules below still matter.
- * The robust score, built for the rough loss, is not needed: at 0.01 s, 26/29 (its scale
- * 1e-9 m^2 was set for the old loss's level).
+ * The robust score, built for the rough loss, is not needed: at 0.01 s, 26/29 (the 29 runs
+ * an A/B stopped early had finished; its scale 1e-9 m^2 was set for the old loss's level).
  *
  * Everything below up to the robust score was measured with the earlier replay, which
  * re-anchored only what a planar observation held (x, y, yaw), on a loss that was white
@@ -526,16 +526,15 @@ static void replay_task(void *ctx, int task, int worker) {
 /* Make room for ncand x nr terms. */
 static int reserve(nds_fit *f, int nr, char *err, int errlen) {
   size_t need = (size_t)f->cand_cap * nr;
-  if (need > f->terms_cap) {
-    nds_replay_terms *t = realloc(f->terms, need * sizeof(*t));
-    if (!t) goto oom;
-    f->terms = t;
-    f->terms_cap = need;
+  if (need <= f->terms_cap) return 0;
+  nds_replay_terms *t = realloc(f->terms, need * sizeof(*t));
+  if (!t) {
+    snprintf(err, errlen, "fit: out of memory for %d rollouts", nr);
+    return -1;
   }
+  f->terms = t;
+  f->terms_cap = need;
   return 0;
-oom:
-  snprintf(err, errlen, "fit: out of memory for %d rollouts", nr);
-  return -1;
 }
 
 /* Sort f->order[0, ncand) by f->done, ascending (insertion sort: stable, and ncand is a
@@ -554,7 +553,8 @@ static void order_by_done(nds_fit *f, int ncand) {
 /* Replay f->theta[0, ncand) on the current buffer; loss[c] sums each candidate's rollout
  * scores in buffer order, so the result does not depend on which worker ran what. The
  * score is the robust one with robust > 0, else L. prune: a CEM iteration, pruned as
- * cfg.prune says (pruned candidates get +inf). */
+ * cfg.prune says (pruned candidates get +inf); the order candidates are replayed in
+ * changes only what is pruned, never a result. */
 static void eval_batch(nds_fit *f, int ncand, int prune, double robust, double *loss) {
   f->bounded = prune && f->cfg.prune && ncand > f->nelite;
   f->robust = robust;
@@ -565,10 +565,9 @@ static void eval_batch(nds_fit *f, int ncand, int prune, double robust, double *
     f->cut[c] = 0;
     f->order[c] = c;
   }
-  if (f->bounded) {
+  if (f->bounded && f->nr == 1) {
     /* Candidates nearest the sampling mean first: near convergence they are the likely
-     * elites, and the sooner good totals are complete the tighter the pruning bound. The
-     * order changes only what is pruned, never a result. */
+     * elites, and the sooner good totals are complete the tighter the pruning bound. */
     const double *xm = nd_cem_mean(f->cem);
     for (int c = 0; c < ncand; c++) {
       double d2 = 0;

@@ -81,7 +81,7 @@ void nds_record_hook(void *ctx, const nds_model *world, const mjData *d, const d
   r->u[2 * k] = force[0];
   r->u[2 * k + 1] = force[1];
   nds_replay_sp_put(r->sp + 6 * k, sp);
-  nds_replay_observe(world, d, r->obj + ND_ROLLOUT_OBJ * k, r->ee + 2 * k);
+  nds_replay_observe(world, d, nd_rollout_obj(r, k), r->ee + 2 * k);
   r->n = k + 1;
 }
 

@@ -110,7 +110,7 @@ int nds_replay_check(const nds_model *nm, const nd_rollout *r, char *err, int er
   }
   /* Re-anchoring normalises the quaternions; one of zero norm has no direction. */
   for (int i = -1; i < r->n; i++) {
-    const double *qt = i < 0 ? r->obj_quat : r->obj + ND_ROLLOUT_OBJ * i + 3;
+    const double *qt = i < 0 ? r->obj_quat : nd_rollout_obj(r, i) + 3;
     if (!(qt[0] * qt[0] + qt[1] * qt[1] + qt[2] * qt[2] + qt[3] * qt[3] > 1e-24)) {
       if (i < 0) snprintf(err, errlen, "replay: record obj_quat has zero norm");
       else snprintf(err, errlen, "replay: record obj[%d] quaternion has zero norm", i);
@@ -155,7 +155,7 @@ static void rec_obs(const nd_rollout *r, int i, double obj[ND_ROLLOUT_OBJ], doub
     memcpy(ee, r->ee_pos, 2 * sizeof(double));
     return;
   }
-  memcpy(obj, r->obj + ND_ROLLOUT_OBJ * i, ND_ROLLOUT_OBJ * sizeof(double));
+  memcpy(obj, nd_rollout_obj(r, i), ND_ROLLOUT_OBJ * sizeof(double));
   memcpy(ee, r->ee + 2 * i, 2 * sizeof(double));
 }
 

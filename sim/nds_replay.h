@@ -10,7 +10,8 @@
  *             nds_ctrl_pid, integral reset at the start: closed loop, as the recording
  *             ran. Any record (both kinds carry sp).
  * After each step the model's object (x, y, yaw of its pose) and sphere (x, y) are
- * compared with what was observed, giving one rollout's terms of the adaptation loss (DESIGN.md sec. 4):
+ * compared with what was observed, giving one rollout's terms of the adaptation loss
+ * (DESIGN.md sec. 4):
  *
  *   L = L_pos,o + k1 L_pos,ee + k2 L_rot,o, each term 1/T sum over the T compared steps.
  *
@@ -60,6 +61,7 @@ typedef struct {
  * depends chaotically on theta, so a replay that kept its own height and tilt started
  * each window from a different hop and its loss was white noise within ~2 % of the truth
  * (nds_fit.c). At the recording theta the replay stays exact up to rounding. */
+
 /* mode with the default controller (nds_ctrl_cfg_default), no re-anchoring. */
 void nds_replay_cfg_default(nds_replay_cfg *cfg, int mode);
 

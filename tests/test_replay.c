@@ -466,12 +466,11 @@ static void test_replay_bad_records(void **state) {
   assert_int_equal(nds_replay_check(&nm, &r, err, sizeof(err)), -1);
   assert_non_null(strstr(err, "obj[37]"));
   r.obj[ND_ROLLOUT_OBJ * 5 + 2] = push[0].obj[ND_ROLLOUT_OBJ * 5 + 2];
-  double *q5 = nd_rollout_obj(&r, 5) + 3, q5w = q5[0];
+  double *q5 = nd_rollout_obj(&r, 5) + 3;
   q5[0] = q5[1] = q5[2] = q5[3] = 0;
   assert_int_equal(nds_replay_check(&nm, &r, err, sizeof(err)), -1);
   assert_non_null(strstr(err, "obj[5] quaternion has zero norm"));
   memcpy(q5, nd_rollout_obj(&push[0], 5) + 3, 4 * sizeof(double));
-  assert_true(q5[0] == q5w);
   r.obj_quat[0] = r.obj_quat[3] = 0;
   assert_int_equal(nds_replay_check(&nm, &r, err, sizeof(err)), -1);
   assert_non_null(strstr(err, "zero norm"));
