@@ -117,7 +117,7 @@ case "$cmd" in
     # No multicast route (an isolated machine): LCM cannot open on the host, so run the
     # demo in a private network namespace where loopback carries it.
     echo "setup.sh: no multicast route on this host; running the demo in a private network namespace" >&2
-    exec "$root/tests/netns-run" "$root/build/bin/nudge-up" demo "$@" ;;
+    exec "$root/tests/tools/netns-run" "$root/build/bin/nudge-up" demo "$@" ;;
   test) build build; cd build && exec ctest --output-on-failure -j 2 ;;
   fuzz) fuzz_run "$@" ;;
   test-asan)

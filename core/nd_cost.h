@@ -2,10 +2,8 @@
 #ifndef ND_COST_H
 #define ND_COST_H
 
-/* A goal pose of the object in the table plane. */
-typedef struct {
-  double x, y, yaw;
-} nd_goal;
+#include "nd_goal.h"
+
 
 /* Weights of the plan cost E = L_pos + w_rot L_rot + w_prox L_prox + w_acc L_acc. */
 typedef struct {

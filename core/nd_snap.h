@@ -6,6 +6,10 @@
 #ifndef ND_SNAP_H
 #define ND_SNAP_H
 
+/* Most keypoints (one min-snap segment each) a plan may carry: plan_t's MAX_KEYPOINTS,
+ * checked where the two meet (processes/common/ndp_validate.h). */
+#define ND_MAX_KEYS 8
+
 /* Kinematic state of one axis: position, velocity, acceleration, jerk. */
 enum { ND_P = 0, ND_V = 1, ND_A = 2, ND_J = 3 };
 

@@ -87,7 +87,7 @@ int nds_episode_run(const nds_model *world, mjData *d, nds_planner *planner,
        * planner's box: nd_exec_cfg_default) is dropped and the current
        * trajectory goes on, as the real executor does; so is a re-sent keypoint, whose
        * segment goes on rather than restarting (restarts can hold the robot still:
-       * ndp_execloop.c). */
+       * exec_loop.c). */
       if (!nd_exec_heading_to(&ex, t, plan.keys[0], ND_EXEC_SAME_KEY))
         (void)nd_exec_plan(&ex, &cfg->exec, t, plan.keys[0], plan.T, xerr, sizeof(xerr));
       next_plan += cfg->plan_period;

@@ -170,15 +170,15 @@ struct nds_fit {
   nds_model proto;      /* the model as given, for checking records against it */
   nds_model *models;    /* one per worker */
   mjData **data;
-  double *cur;          /* nworkers x NDS_NTHETA: theta each worker's model holds, NaN none */
+  double *cur;          /* nworkers x ND_NTHETA: theta each worker's model holds, NaN none */
   nd_cem *cem;
   nd_rng rng;
-  int nfit, idx[NDS_NTHETA];  /* fitted parameters, in theta order */
-  double scale[NDS_NTHETA];   /* sigma0 of each fitted parameter (CEM space = theta / scale) */
-  double hold[NDS_NTHETA];    /* the full theta; fitted entries are overwritten per candidate */
+  int nfit, idx[ND_NTHETA];  /* fitted parameters, in theta order */
+  double scale[ND_NTHETA];   /* sigma0 of each fitted parameter (CEM space = theta / scale) */
+  double hold[ND_NTHETA];    /* the full theta; fitted entries are overwritten per candidate */
 
   int cand_cap;         /* rows of theta: nd_cem_max_batch */
-  double *theta;        /* cand_cap x NDS_NTHETA candidates of the current batch */
+  double *theta;        /* cand_cap x ND_NTHETA candidates of the current batch */
   size_t terms_cap;
   nds_replay_terms *terms;  /* cand x rollout, candidate-major */
 
@@ -219,11 +219,11 @@ void nds_fit_cfg_default(nds_fit_cfg *cfg) {
   cfg->pop = 32;
   cfg->iters = 2;
   cfg->elite_frac = 0.2;
-  cfg->fit[NDS_TH_SLIDE] = cfg->fit[NDS_TH_TORSION] = cfg->fit[NDS_TH_ROLL] = 1;
-  cfg->fit[NDS_TH_MASS] = 0;
+  cfg->fit[ND_TH_SLIDE] = cfg->fit[ND_TH_TORSION] = cfg->fit[ND_TH_ROLL] = 1;
+  cfg->fit[ND_TH_MASS] = 0;
   cfg->lower = 1e-7;
-  for (int i = 0; i < NDS_NTHETA; i++) {
-    double th = nds_theta_true[i], D = NDS_FIT_D_DEFAULT;
+  for (int i = 0; i < ND_NTHETA; i++) {
+    double th = nd_theta_true[i], D = NDS_FIT_D_DEFAULT;
     cfg->mu0[i] = th;
     cfg->sigma0[i] = (th + D * th - fmax(cfg->lower, th - D * th)) / 16;
   }
@@ -240,9 +240,9 @@ void nds_fit_cfg_default(nds_fit_cfg *cfg) {
   cfg->seed = 1;
 }
 
-void nds_fit_paper_prior(const double theta[NDS_NTHETA], double D, double lower, nd_rng *r,
-                         double mu0[NDS_NTHETA], double sigma0[NDS_NTHETA]) {
-  for (int i = 0; i < NDS_NTHETA; i++) {
+void nds_fit_paper_prior(const double theta[ND_NTHETA], double D, double lower, nd_rng *r,
+                         double mu0[ND_NTHETA], double sigma0[ND_NTHETA]) {
+  for (int i = 0; i < ND_NTHETA; i++) {
     double th = theta[i], lo = th - D * th, hi = th + D * th;
     double u = nd_rng_uniform(r);
     mu0[i] = fmax(lower, lo + u * (hi - lo));
@@ -250,7 +250,7 @@ void nds_fit_paper_prior(const double theta[NDS_NTHETA], double D, double lower,
   }
 }
 
-static const char *pname[NDS_NTHETA] = {"slide", "torsion", "roll", "mass"};
+static const char *pname[ND_NTHETA] = {"slide", "torsion", "roll", "mass"};
 
 int nds_fit_cfg_check(const nds_fit_cfg *c, char *err, int errlen) {
   const char *bad = NULL;
@@ -277,7 +277,7 @@ int nds_fit_cfg_check(const nds_fit_cfg *c, char *err, int errlen) {
     return -1;
   }
   int nfit = 0;
-  for (int i = 0; i < NDS_NTHETA; i++) {
+  for (int i = 0; i < ND_NTHETA; i++) {
     if (c->fit[i] != 0 && c->fit[i] != 1) {
       snprintf(err, errlen, "fit: fit[%d] (%s) = %d, must be 0 or 1", i, pname[i], c->fit[i]);
       return -1;
@@ -294,10 +294,10 @@ int nds_fit_cfg_check(const nds_fit_cfg *c, char *err, int errlen) {
     return -1;
   }
   /* What the first candidate sees: fitted entries at their clipped prior mean. */
-  double th[NDS_NTHETA];
-  for (int i = 0; i < NDS_NTHETA; i++) th[i] = c->fit[i] ? fmax(c->lower, c->mu0[i]) : c->mu0[i];
+  double th[ND_NTHETA];
+  for (int i = 0; i < ND_NTHETA; i++) th[i] = c->fit[i] ? fmax(c->lower, c->mu0[i]) : c->mu0[i];
   char terr[160];
-  if (nds_theta_check(th, terr, sizeof(terr))) {
+  if (nd_theta_check(th, terr, sizeof(terr))) {
     snprintf(err, errlen, "fit: prior mean: %s", terr);
     return -1;
   }
@@ -340,7 +340,7 @@ nds_fit *nds_fit_create(const nds_model *proto, const nds_fit_cfg *cfg, nd_pool 
   f->nworkers = nd_pool_size(pool);
   f->models = calloc(f->nworkers, sizeof(*f->models));
   f->data = calloc(f->nworkers, sizeof(*f->data));
-  f->cur = malloc(sizeof(double) * NDS_NTHETA * f->nworkers);
+  f->cur = malloc(sizeof(double) * ND_NTHETA * f->nworkers);
   if (!f->models || !f->data || !f->cur) goto oom;
   for (int w = 0; w < f->nworkers; w++) {
     if (nds_model_copy(&f->models[w], proto, err, errlen)) {
@@ -349,11 +349,11 @@ nds_fit *nds_fit_create(const nds_model *proto, const nds_fit_cfg *cfg, nd_pool 
     }
     f->data[w] = mj_makeData(f->models[w].m);
     if (!f->data[w]) goto oom;
-    for (int i = 0; i < NDS_NTHETA; i++) f->cur[NDS_NTHETA * w + i] = NAN;
+    for (int i = 0; i < ND_NTHETA; i++) f->cur[ND_NTHETA * w + i] = NAN;
   }
 
-  double lower[NDS_NTHETA];
-  for (int i = 0; i < NDS_NTHETA; i++) {
+  double lower[ND_NTHETA];
+  for (int i = 0; i < ND_NTHETA; i++) {
     if (!cfg->fit[i]) continue;
     f->idx[f->nfit] = i;
     f->scale[f->nfit] = cfg->sigma0[i];
@@ -378,7 +378,7 @@ nds_fit *nds_fit_create(const nds_model *proto, const nds_fit_cfg *cfg, nd_pool 
   f->nelite = (int)(cfg->elite_frac * cfg->pop + 0.5);
   if (f->nelite < 1) f->nelite = 1;
   if (f->nelite > cfg->pop) f->nelite = cfg->pop;
-  f->theta = malloc(sizeof(double) * NDS_NTHETA * f->cand_cap);
+  f->theta = malloc(sizeof(double) * ND_NTHETA * f->cand_cap);
   f->done = malloc(sizeof(double) * f->cand_cap);
   f->left = malloc(sizeof(int) * f->cand_cap);
   f->cut = malloc(f->cand_cap);
@@ -400,10 +400,10 @@ oom:
   return NULL;
 }
 
-int nds_fit_set_dist(nds_fit *f, const double mean[NDS_NTHETA], const double std[NDS_NTHETA],
+int nds_fit_set_dist(nds_fit *f, const double mean[ND_NTHETA], const double std[ND_NTHETA],
                      char *err, int errlen) {
-  double th[NDS_NTHETA], xm[NDS_NTHETA], xs[NDS_NTHETA];
-  for (int i = 0; i < NDS_NTHETA; i++) {
+  double th[ND_NTHETA], xm[ND_NTHETA], xs[ND_NTHETA];
+  for (int i = 0; i < ND_NTHETA; i++) {
     if (f->cfg.fit[i] && !(isfinite(mean[i]) && isfinite(std[i]) && std[i] >= 0)) {
       snprintf(err, errlen, "fit: %s mean = %g, std = %g: need finite, std >= 0", pname[i],
                mean[i], std[i]);
@@ -412,7 +412,7 @@ int nds_fit_set_dist(nds_fit *f, const double mean[NDS_NTHETA], const double std
     th[i] = f->cfg.fit[i] ? fmax(f->cfg.lower, mean[i]) : mean[i];
   }
   char terr[160];
-  if (nds_theta_check(th, terr, sizeof(terr))) {
+  if (nd_theta_check(th, terr, sizeof(terr))) {
     snprintf(err, errlen, "fit: distribution mean: %s", terr);
     return -1;
   }
@@ -421,14 +421,14 @@ int nds_fit_set_dist(nds_fit *f, const double mean[NDS_NTHETA], const double std
     xs[j] = std[f->idx[j]] / f->scale[j];
   }
   nd_cem_set_dist(f->cem, xm, xs);
-  for (int i = 0; i < NDS_NTHETA; i++)
+  for (int i = 0; i < ND_NTHETA; i++)
     if (!f->cfg.fit[i]) f->hold[i] = mean[i];
   return 0;
 }
 
-void nds_fit_dist(const nds_fit *f, double mean[NDS_NTHETA], double std[NDS_NTHETA]) {
+void nds_fit_dist(const nds_fit *f, double mean[ND_NTHETA], double std[ND_NTHETA]) {
   const double *xm = nd_cem_mean(f->cem), *xs = nd_cem_std(f->cem);
-  for (int i = 0; i < NDS_NTHETA; i++) {
+  for (int i = 0; i < ND_NTHETA; i++) {
     mean[i] = f->hold[i];
     std[i] = 0;
   }
@@ -441,7 +441,7 @@ void nds_fit_dist(const nds_fit *f, double mean[NDS_NTHETA], double std[NDS_NTHE
 /* Candidate theta of CEM point x: held entries, fitted ones scaled back (and kept at
  * lower, which the product may miss by a rounding). */
 static void to_theta(const nds_fit *f, const double *x, double *th) {
-  memcpy(th, f->hold, sizeof(double) * NDS_NTHETA);
+  memcpy(th, f->hold, sizeof(double) * ND_NTHETA);
   for (int j = 0; j < f->nfit; j++) th[f->idx[j]] = fmax(f->cfg.lower, x[j] * f->scale[j]);
 }
 
@@ -495,13 +495,13 @@ static void replay_task(void *ctx, int task, int worker) {
     memset(out, 0, sizeof(*out));
     out->cut = 1;
   } else {
-    const double *th = f->theta + (size_t)NDS_NTHETA * c;
-    double *cur = f->cur + (size_t)NDS_NTHETA * worker;
+    const double *th = f->theta + (size_t)ND_NTHETA * c;
+    double *cur = f->cur + (size_t)ND_NTHETA * worker;
     nds_model *nm = &f->models[worker];
     int ok = 1;
-    if (memcmp(cur, th, sizeof(double) * NDS_NTHETA) != 0) {
+    if (memcmp(cur, th, sizeof(double) * ND_NTHETA) != 0) {
       ok = nds_theta_apply(nm, th, err, sizeof(err)) == 0;
-      for (int i = 0; i < NDS_NTHETA; i++) cur[i] = ok ? th[i] : NAN;
+      for (int i = 0; i < ND_NTHETA; i++) cur[i] = ok ? th[i] : NAN;
     }
     if (!ok) {
       memset(out, 0, sizeof(*out));
@@ -572,7 +572,7 @@ static void eval_batch(nds_fit *f, int ncand, int prune, double robust, double *
     for (int c = 0; c < ncand; c++) {
       double d2 = 0;
       for (int j = 0; j < f->nfit; j++) {
-        double e = f->theta[NDS_NTHETA * c + f->idx[j]] / f->scale[j] - xm[j];
+        double e = f->theta[ND_NTHETA * c + f->idx[j]] / f->scale[j] - xm[j];
         d2 += e * e;
       }
       f->done[c] = d2;  /* scratch until the pool runs */
@@ -604,7 +604,7 @@ static void eval_batch(nds_fit *f, int ncand, int prune, double robust, double *
 
 static int cem_cost(void *ctx, const double *x, int n, double *cost) {
   nds_fit *f = ctx;
-  for (int c = 0; c < n; c++) to_theta(f, x + (size_t)c * f->nfit, f->theta + NDS_NTHETA * c);
+  for (int c = 0; c < n; c++) to_theta(f, x + (size_t)c * f->nfit, f->theta + ND_NTHETA * c);
   eval_batch(f, n, 1, f->cfg.robust, cost);
   for (int c = 0; c < n; c++) {
     if (isfinite(cost[c])) {
@@ -633,26 +633,26 @@ static int check_buffer(nds_fit *f, const nd_rollout *rs, int n, char *err, int 
 }
 
 /* nds_fit_loss and nds_fit_score: theta alone, scored with robust. */
-static int eval_one(nds_fit *f, const double theta[NDS_NTHETA], const nd_rollout *rs, int n,
+static int eval_one(nds_fit *f, const double theta[ND_NTHETA], const nd_rollout *rs, int n,
                     double robust, double *loss, nds_replay_terms *per, char *err,
                     int errlen) {
-  if (nds_theta_check(theta, err, errlen) || check_buffer(f, rs, n, err, errlen)) return -1;
+  if (nd_theta_check(theta, err, errlen) || check_buffer(f, rs, n, err, errlen)) return -1;
   f->rs = rs;
   f->nr = n;
   f->task_err = 0;
-  memcpy(f->theta, theta, sizeof(double) * NDS_NTHETA);
+  memcpy(f->theta, theta, sizeof(double) * ND_NTHETA);
   f->nrun = 0;
   eval_batch(f, 1, 0, robust, loss);
   if (per) memcpy(per, f->terms, sizeof(*per) * n);
   return 0;
 }
 
-int nds_fit_loss(nds_fit *f, const double theta[NDS_NTHETA], const nd_rollout *rs, int n,
+int nds_fit_loss(nds_fit *f, const double theta[ND_NTHETA], const nd_rollout *rs, int n,
                  double *loss, nds_replay_terms *per, char *err, int errlen) {
   return eval_one(f, theta, rs, n, 0, loss, per, err, errlen);
 }
 
-int nds_fit_score(nds_fit *f, const double theta[NDS_NTHETA], const nd_rollout *rs, int n,
+int nds_fit_score(nds_fit *f, const double theta[ND_NTHETA], const nd_rollout *rs, int n,
                   double *score, nds_replay_terms *per, char *err, int errlen) {
   return eval_one(f, theta, rs, n, f->cfg.robust, score, per, err, errlen);
 }
@@ -666,12 +666,12 @@ int nds_fit_run(nds_fit *f, const nd_rollout *rs, int n, nds_fit_out *out, char 
   f->nrun = 0;
 
   /* A failed run must leave the distribution and the generator as they were. */
-  double m0[NDS_NTHETA], s0[NDS_NTHETA];
+  double m0[ND_NTHETA], s0[ND_NTHETA];
   memcpy(m0, nd_cem_mean(f->cem), sizeof(double) * f->nfit);
   memcpy(s0, nd_cem_std(f->cem), sizeof(double) * f->nfit);
   nd_rng r0 = f->rng;
   if (f->cfg.rel_floor > 0) {
-    double xs[NDS_NTHETA];
+    double xs[ND_NTHETA];
     for (int j = 0; j < f->nfit; j++)
       xs[j] = fmax(s0[j], f->cfg.rel_floor * fabs(m0[j]));
     nd_cem_set_dist(f->cem, m0, xs);

@@ -41,9 +41,9 @@
 typedef struct {
   int pop, iters;              /* Q >= 2 candidates, C in [1, NDS_FIT_MAX_ITERS] iterations */
   double elite_frac;           /* rho in (0, 1] */
-  int fit[NDS_NTHETA];         /* 1: fitted, 0: held at mu0 (at least one fitted) */
-  double mu0[NDS_NTHETA];      /* prior mean; a held parameter's value */
-  double sigma0[NDS_NTHETA];   /* prior std, > 0 where fitted */
+  int fit[ND_NTHETA];         /* 1: fitted, 0: held at mu0 (at least one fitted) */
+  double mu0[ND_NTHETA];      /* prior mean; a held parameter's value */
+  double sigma0[ND_NTHETA];   /* prior std, > 0 where fitted */
   double lower;                /* every fitted parameter stays >= lower > 0 (samples clipped) */
   double std_floor;            /* std never falls below std_floor * sigma0 (0: the paper's
                                   plain CEM, which freezes after a run or two) */
@@ -62,7 +62,7 @@ typedef struct {
 } nds_fit_cfg;
 
 /* Paper settings: Q 32, C 2, rho 0.2, fitting the three frictions with the mass held;
- * prior at nds_theta_true with the paper's D = 0.2 std; lower 1e-7; k1 = 1,
+ * prior at nd_theta_true with the paper's D = 0.2 std; lower 1e-7; k1 = 1,
  * k2 = 1e-3 m^2/rad; prune; seed 1. Beyond the paper (measured in nds_fit.c): step_std 2
  * gated at 0.75 std, std_floor 0.25, rel_floor 0.05, FORCE replay re-anchored every 5 ms
  * with the default controller, candidates ranked by L (robust 0; 1e-9 m^2 ranks better
@@ -74,14 +74,14 @@ int nds_fit_cfg_check(const nds_fit_cfg *cfg, char *err, int errlen);
 
 /* The paper's prior around theta for uncertainty D > 0: mu0 ~ U(theta - D theta,
  * theta + D theta) (clipped at lower), sigma0 = (theta + D theta - max(lower,
- * theta - D theta)) / 16, for all NDS_NTHETA entries (four draws from r, in order). */
-void nds_fit_paper_prior(const double theta[NDS_NTHETA], double D, double lower, nd_rng *r,
-                         double mu0[NDS_NTHETA], double sigma0[NDS_NTHETA]);
+ * theta - D theta)) / 16, for all ND_NTHETA entries (four draws from r, in order). */
+void nds_fit_paper_prior(const double theta[ND_NTHETA], double D, double lower, nd_rng *r,
+                         double mu0[ND_NTHETA], double sigma0[ND_NTHETA]);
 
 typedef struct {
-  double mean[NDS_NTHETA];     /* distribution after the run; held parameters: their value */
-  double std[NDS_NTHETA];      /* held parameters: 0 */
-  double best[NDS_NTHETA];     /* lowest-loss candidate of the run */
+  double mean[ND_NTHETA];     /* distribution after the run; held parameters: their value */
+  double std[ND_NTHETA];      /* held parameters: 0 */
+  double best[ND_NTHETA];     /* lowest-loss candidate of the run */
   double best_loss;            /* its score (L, or the robust score with cfg.robust) */
   double loss_mean;            /* L(mean) on the buffer, evaluated after the last update */
   int diverged_mean;           /* replays of the mean that diverged */
@@ -106,11 +106,11 @@ void nds_fit_free(nds_fit *f);
 /* Replace the distribution: full theta vectors; fitted entries need finite mean (clipped
  * at lower) and finite std >= 0, held entries a valid theta value (std ignored), which
  * they are held at from now on. Return 0, or -1 with a message (nothing changed). */
-int nds_fit_set_dist(nds_fit *f, const double mean[NDS_NTHETA], const double std[NDS_NTHETA],
+int nds_fit_set_dist(nds_fit *f, const double mean[ND_NTHETA], const double std[ND_NTHETA],
                      char *err, int errlen);
 
 /* The current distribution (held entries: value, std 0). */
-void nds_fit_dist(const nds_fit *f, double mean[NDS_NTHETA], double std[NDS_NTHETA]);
+void nds_fit_dist(const nds_fit *f, double mean[ND_NTHETA], double std[ND_NTHETA]);
 
 /* C iterations of CEM on the buffer rs[0, n), then L of the resulting mean (out->flat:
  * the loss did not tell candidates apart and the distribution is unchanged). Every record
@@ -121,12 +121,12 @@ int nds_fit_run(nds_fit *f, const nd_rollout *rs, int n, nds_fit_out *out, char 
 
 /* L(theta) on rs[0, n) in parallel (a validation loss). per, if not NULL, receives each
  * rollout's terms. Return 0, or -1 with a message. */
-int nds_fit_loss(nds_fit *f, const double theta[NDS_NTHETA], const nd_rollout *rs, int n,
+int nds_fit_loss(nds_fit *f, const double theta[ND_NTHETA], const nd_rollout *rs, int n,
                  double *loss, nds_replay_terms *per, char *err, int errlen);
 
 /* nds_fit_loss, scored as CEM ranks a candidate: the robust score with cfg.robust > 0
  * (per[i].robust each rollout's), else L. */
-int nds_fit_score(nds_fit *f, const double theta[NDS_NTHETA], const nd_rollout *rs, int n,
+int nds_fit_score(nds_fit *f, const double theta[ND_NTHETA], const nd_rollout *rs, int n,
                   double *score, nds_replay_terms *per, char *err, int errlen);
 
 #endif

@@ -8,9 +8,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* Default of the simulation study: MuJoCo's default friction and a 1 kg sphere. */
-const double nds_theta_true[NDS_NTHETA] = {1.0, 0.005, 0.0001, 1.0};
-
 /* The sphere floats this far above the table: it never touches it (contact excluded),
  * the gap only keeps the two apart when drawn. */
 #define NDS_EE_GAP 0.001
@@ -36,9 +33,6 @@ const double nds_theta_true[NDS_NTHETA] = {1.0, 0.005, 0.0001, 1.0};
 #define NDS_NCONMAX 32
 #define NDS_NSTACK 100000
 
-static const char *theta_name[NDS_NTHETA] = {"sliding friction", "torsional friction",
-                                             "rolling friction", "sphere mass"};
-
 void nds_scene_cfg_default(nds_scene_cfg *cfg) {
   cfg->obj_half[0] = 0.05;
   cfg->obj_half[1] = 0.03;
@@ -48,20 +42,7 @@ void nds_scene_cfg_default(nds_scene_cfg *cfg) {
   cfg->timestep = 0.001;
   cfg->condim = 6;
   cfg->tilt_damping = 0.1;
-  memcpy(cfg->theta, nds_theta_true, sizeof(cfg->theta));
-}
-
-int nds_theta_check(const double theta[NDS_NTHETA], char *err, int errlen) {
-  for (int i = 0; i < NDS_NTHETA; i++) {
-    double v = theta[i];
-    int bad = !isfinite(v) || (i == NDS_TH_MASS ? v <= 0 : v < 0);
-    if (bad) {
-      snprintf(err, errlen, "theta[%d] (%s) = %g: must be finite and %s", i, theta_name[i],
-               v, i == NDS_TH_MASS ? "> 0" : ">= 0");
-      return -1;
-    }
-  }
-  return 0;
+  memcpy(cfg->theta, nd_theta_true, sizeof(cfg->theta));
 }
 
 static int positive(double v) { return isfinite(v) && v > 0; }
@@ -103,7 +84,7 @@ int nds_scene_cfg_check(const nds_scene_cfg *cfg, char *err, int errlen) {
              cfg->ee_radius, cfg->ee_radius + NDS_EE_GAP, 2 * cfg->obj_half[2]);
     return -1;
   }
-  return nds_theta_check(cfg->theta, err, errlen);
+  return nd_theta_check(cfg->theta, err, errlen);
 }
 
 int nds_scene_xml(const nds_scene_cfg *cfg, char *buf, int len, char *err, int errlen) {
@@ -144,9 +125,9 @@ int nds_scene_xml(const nds_scene_cfg *cfg, char *buf, int len, char *err, int e
       "</mujoco>\n",
       cfg->timestep, NDS_ITERATIONS, NDS_TOLERANCE,                       /* option */
       NDS_NCONMAX, NDS_NCONMAX * 6, NDS_NSTACK,                           /* size */
-      cfg->condim, th[NDS_TH_SLIDE], th[NDS_TH_TORSION], th[NDS_TH_ROLL], /* default */
+      cfg->condim, th[ND_TH_SLIDE], th[ND_TH_TORSION], th[ND_TH_ROLL], /* default */
       h[2], m, ix, iy, iz, h[0], h[1], h[2],                              /* object */
-      NDS_EE_X0, ee_z, NDS_EE_X0, cfg->ee_radius, th[NDS_TH_MASS]);       /* ee */
+      NDS_EE_X0, ee_z, NDS_EE_X0, cfg->ee_radius, th[ND_TH_MASS]);       /* ee */
   if (n < 0 || n >= len) {
     snprintf(err, errlen, "scene: XML needs %d bytes, buffer has %d", n + 1, len);
     return -1;
@@ -263,7 +244,7 @@ int nds_model_init(nds_model *nm, const nds_scene_cfg *cfg, char *err, int errle
 int nds_model_load_file(nds_model *nm, const char *path, const nds_scene_cfg *cfg,
                         char *err, int errlen) {
   memset(nm, 0, sizeof(*nm));
-  if (nds_theta_check(cfg->theta, err, errlen)) return -1;
+  if (nd_theta_check(cfg->theta, err, errlen)) return -1;
   char lerr[512] = "";
   nm->m = mj_loadXML(path, NULL, lerr, sizeof(lerr));
   if (!nm->m) {
@@ -311,35 +292,23 @@ void nds_model_free(nds_model *nm) {
   nm->m = NULL;
 }
 
-int nds_theta_parse(const char *s, const char *what, double theta[NDS_NTHETA], char *err,
-                    int errlen) {
-  if (nd_parse_list(s, what, NDS_NTHETA, 0.0, 1e4, theta, err, errlen)) return -1;
-  /* The list's range admits a zero mass; the message must still name the option. */
-  char why[160];
-  if (nds_theta_check(theta, why, sizeof(why))) {
-    snprintf(err, errlen, "%s: %s", what, why);
-    return -1;
-  }
-  return 0;
-}
-
-int nds_theta_apply(nds_model *nm, const double theta[NDS_NTHETA], char *err, int errlen) {
-  if (nds_theta_check(theta, err, errlen)) return -1;
+int nds_theta_apply(nds_model *nm, const double theta[ND_NTHETA], char *err, int errlen) {
+  if (nd_theta_check(theta, err, errlen)) return -1;
   mjModel *m = nm->m;
 
   /* Every geom gets theta: contacts combine friction by maximum, so each contact sees
    * theta exactly whichever pair it joins. */
   for (int g = 0; g < m->ngeom; g++) {
-    m->geom_friction[3 * g + 0] = theta[NDS_TH_SLIDE];
-    m->geom_friction[3 * g + 1] = theta[NDS_TH_TORSION];
-    m->geom_friction[3 * g + 2] = theta[NDS_TH_ROLL];
+    m->geom_friction[3 * g + 0] = theta[ND_TH_SLIDE];
+    m->geom_friction[3 * g + 1] = theta[ND_TH_TORSION];
+    m->geom_friction[3 * g + 2] = theta[ND_TH_ROLL];
   }
 
   /* Scaled from the values as loaded, not from the current ones: repeated applications
    * would otherwise accumulate rounding and theta would not fix the model's bits. */
   int b = nm->ee_body;
-  double s = theta[NDS_TH_MASS] / nm->ee_mass0;
-  m->body_mass[b] = theta[NDS_TH_MASS];
+  double s = theta[ND_TH_MASS] / nm->ee_mass0;
+  m->body_mass[b] = theta[ND_TH_MASS];
   for (int k = 0; k < 3; k++) m->body_inertia[3 * b + k] = nm->ee_inertia0[k] * s;
 
   /* What mj_setConst derives from the masses, updated without an mjData: the subtree

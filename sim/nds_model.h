@@ -9,11 +9,8 @@
 
 #include <mujoco/mujoco.h>
 
-/* theta = (sliding, torsional, rolling friction, end-effector sphere mass). */
-enum { NDS_TH_SLIDE = 0, NDS_TH_TORSION, NDS_TH_ROLL, NDS_TH_MASS, NDS_NTHETA };
+#include "nd_theta.h"
 
-/* Ground truth of the simulation study: MuJoCo's default friction and a 1 kg sphere. */
-extern const double nds_theta_true[NDS_NTHETA];
 
 typedef struct {
   double obj_half[3];    /* cuboid half sizes (x, y, z), m */
@@ -22,11 +19,11 @@ typedef struct {
   double timestep;       /* s */
   int condim;            /* 3, 4 or 6: torsional needs >= 4, rolling needs 6 */
   double tilt_damping;   /* N m s/rad on the object's roll and pitch dofs only (>= 0) */
-  double theta[NDS_NTHETA];
+  double theta[ND_NTHETA];
 } nds_scene_cfg;
 
 /* Defaults: 10 x 6 x 5 cm, 0.5 kg box; 2.5 cm sphere; 1 ms; condim 6; tilt damping 0.1;
- * nds_theta_true. The tilt damping keeps a sliding box from rocking on its soft corner
+ * nd_theta_true. The tilt damping keeps a sliding box from rocking on its soft corner
  * contacts at coarse timesteps (MuJoCo's Euler integrates it implicitly); it leaves yaw
  * and translation free, and a box that stays flat, as a pushed box does, never feels it. */
 void nds_scene_cfg_default(nds_scene_cfg *cfg);
@@ -68,16 +65,8 @@ int nds_model_copy(nds_model *dst, const nds_model *src, char *err, int errlen);
 /* Free what nm owns; nm may be zeroed or half-built. */
 void nds_model_free(nds_model *nm);
 
-/* Check theta: finite, frictions >= 0, mass > 0. Return 0, or -1 naming the bad value. */
-int nds_theta_check(const double theta[NDS_NTHETA], char *err, int errlen);
-
-/* Parse "S,T,R,M" (option what, e.g. "--theta") into theta and check it. Return 0, or -1
- * with a message that starts with what. */
-int nds_theta_parse(const char *s, const char *what, double theta[NDS_NTHETA], char *err,
-                    int errlen);
-
 /* Apply theta to the model's contacts and sphere mass. Return 0, or -1 (model unchanged). */
-int nds_theta_apply(nds_model *nm, const double theta[NDS_NTHETA], char *err, int errlen);
+int nds_theta_apply(nds_model *nm, const double theta[ND_NTHETA], char *err, int errlen);
 
 /* Count d's active contacts (as the last mj_step or mj_forward left them) between the
  * object and the world's geoms (the table), and between the object and the sphere. */

@@ -76,9 +76,9 @@ static int plan_cost(void *ctx, const double *x, int n, double *cost) {
 
 nds_planner *nds_planner_create(const nds_model *model, const nds_planner_cfg *cfg,
                                 nd_pool *pool, char *err, int errlen) {
-  if (cfg->M < 1 || cfg->M > NDS_MAX_KEYS || !(cfg->T > 0.0) || cfg->pop < 2 || cfg->iters < 1) {
+  if (cfg->M < 1 || cfg->M > ND_MAX_KEYS || !(cfg->T > 0.0) || cfg->pop < 2 || cfg->iters < 1) {
     snprintf(err, errlen, "planner: need 1 <= M <= %d, T > 0, pop >= 2, iters >= 1 (got M %d, "
-             "T %g, pop %d, iters %d)", NDS_MAX_KEYS, cfg->M, cfg->T, cfg->pop, cfg->iters);
+             "T %g, pop %d, iters %d)", ND_MAX_KEYS, cfg->M, cfg->T, cfg->pop, cfg->iters);
     return NULL;
   }
   if (!(cfg->v_max > 0.0) || !(cfg->a_max > 0.0)) {
@@ -149,7 +149,7 @@ void nds_planner_free(nds_planner *p) {
   free(p);
 }
 
-int nds_planner_set_theta(nds_planner *p, const double theta[NDS_NTHETA], char *err,
+int nds_planner_set_theta(nds_planner *p, const double theta[ND_NTHETA], char *err,
                           int errlen) {
   return nds_batch_set_theta(p->batch, theta, err, errlen);
 }
@@ -172,7 +172,7 @@ int nds_planner_plan(nds_planner *p, const nds_state *s, const double sp0[2][4],
   if (!p->warm) {
     /* Cold start: every keypoint at the current setpoint, at rest. The proximity term
      * draws the samples toward the object from there. */
-    double mean[4 * NDS_MAX_KEYS];
+    double mean[4 * ND_MAX_KEYS];
     for (int k = 0; k < c->M; k++) {
       mean[4 * k + 0] = sp0[0][0];
       mean[4 * k + 1] = sp0[1][0];

@@ -31,7 +31,7 @@ typedef struct {
 void nds_planner_cfg_default(nds_planner_cfg *cfg);
 
 typedef struct {
-  double keys[NDS_MAX_KEYS][4]; /* best keypoint sequence */
+  double keys[ND_MAX_KEYS][4]; /* best keypoint sequence */
   int M;
   double T;
   double cost;              /* E of the best candidate (penalties included) */
@@ -47,7 +47,7 @@ nds_planner *nds_planner_create(const nds_model *model, const nds_planner_cfg *c
 void nds_planner_free(nds_planner *p);
 
 /* Use theta for every following plan. Return 0, or -1 with a message. */
-int nds_planner_set_theta(nds_planner *p, const double theta[NDS_NTHETA], char *err,
+int nds_planner_set_theta(nds_planner *p, const double theta[ND_NTHETA], char *err,
                           int errlen);
 
 /* The configuration the planner runs with. */

@@ -40,7 +40,7 @@ void nds_record_free(nds_record *rec) {
 
 int nds_record_begin(nds_record *rec, const nds_model *world, const nds_state *start,
                      int64_t task_id, int64_t utime, const nd_goal *goal,
-                     const double theta[NDS_NTHETA], char *err, int errlen) {
+                     const double theta[ND_NTHETA], char *err, int errlen) {
   if (rec->cap < 1) {
     snprintf(err, errlen, "recorder: not initialised");
     return -1;

@@ -45,7 +45,7 @@ void nds_record_free(nds_record *rec);
  * init (a recording of another rate would not replay). */
 int nds_record_begin(nds_record *rec, const nds_model *world, const nds_state *start,
                      int64_t task_id, int64_t utime, const nd_goal *goal,
-                     const double theta[NDS_NTHETA], char *err, int errlen);
+                     const double theta[ND_NTHETA], char *err, int errlen);
 
 /* The nds_episode_hook: ctx is the nds_record. Appends one step; allocates nothing. */
 void nds_record_hook(void *ctx, const nds_model *world, const mjData *d, const double sp[2][4],

@@ -32,7 +32,7 @@ void nds_rollout(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
   memset(out, 0, sizeof(*out)); /* padding too, so results compare bytewise */
   double dt = m->opt.timestep;
   double steps = round(M * T / dt);
-  if (M < 1 || M > NDS_MAX_KEYS || !(T > 0) || !(steps >= 1 && steps <= MAX_STEPS) ||
+  if (M < 1 || M > ND_MAX_KEYS || !(T > 0) || !(steps >= 1 && steps <= MAX_STEPS) ||
       !nd_all_finite(&sp0[0][0], 8) || !nd_all_finite(keys, 4 * M) ||
       nds_state_set(nm, d, s0, err, sizeof(err))) {
     fail(out);
@@ -41,7 +41,7 @@ void nds_rollout(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
   long nsteps = (long)steps;
 
   /* Segment i starts from where segment i-1 ends, so the chain is C3-continuous. */
-  nd_snap_seg seg[NDS_MAX_KEYS];
+  nd_snap_seg seg[ND_MAX_KEYS];
   double s[2][4];
   memcpy(s, sp0, sizeof(s));
   for (int i = 0; i < M; i++) {
@@ -161,9 +161,9 @@ nd_pool *nds_batch_pool(nds_batch *b) { return b->pool; }
 nds_model *nds_batch_model(nds_batch *b, int worker) { return &b->models[worker]; }
 mjData *nds_batch_data(nds_batch *b, int worker) { return b->data[worker]; }
 
-int nds_batch_set_theta(nds_batch *b, const double theta[NDS_NTHETA], char *err, int errlen) {
+int nds_batch_set_theta(nds_batch *b, const double theta[ND_NTHETA], char *err, int errlen) {
   /* Checked once up front, so no model is left with a different theta than the others. */
-  if (nds_theta_check(theta, err, errlen)) return -1;
+  if (nd_theta_check(theta, err, errlen)) return -1;
   for (int w = 0; w < b->nworkers; w++)
     if (nds_theta_apply(&b->models[w], theta, err, errlen)) return -1;
   return 0;

@@ -7,11 +7,10 @@
 #define NDS_ROLLOUT_H
 
 #include "nd_pool.h"
+#include "nd_snap.h"
 #include "nds_ctrl.h"
 #include "nds_model.h"
 #include "nds_state.h"
-
-#define NDS_MAX_KEYS 8
 
 typedef struct {
   double obj_xy[2];     /* final object position */
@@ -45,7 +44,7 @@ nds_model *nds_batch_model(nds_batch *b, int worker);
 mjData *nds_batch_data(nds_batch *b, int worker);
 
 /* Apply theta to every worker's model. Return 0, or -1 with a message (models unchanged). */
-int nds_batch_set_theta(nds_batch *b, const double theta[NDS_NTHETA], char *err, int errlen);
+int nds_batch_set_theta(nds_batch *b, const double theta[ND_NTHETA], char *err, int errlen);
 
 /* Run n rollouts (keys: n * M * 4) from one state in parallel; out has n entries. */
 void nds_batch_rollouts(nds_batch *b, const nds_ctrl_cfg *ctrl, const nds_state *s0,

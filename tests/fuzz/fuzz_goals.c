@@ -1,4 +1,4 @@
-/* Fuzz target: goal lists (processes/ndp_goals.h), the one text format a user hands the
+/* Fuzz target: goal lists (processes/nd_goal.h), the one text format a user hands the
  * system.
  *
  * The input is the text of a goal file. Parsing must return 0 or -1 with a message that
@@ -10,18 +10,18 @@
 #include <string.h>
 
 #include "fuzz.h"
-#include "ndp_goals.h"
+#include "nd_goal.h"
 
 #define FZ_CAP 8  /* small, so that "more than cap goals" is reachable */
 
-static void fz_goal_ok(const ndp_goal *g) {
-  FZ_CHECK(isfinite(g->x) && fabs(g->x) <= NDP_GOAL_MAX_POS && isfinite(g->y) &&
-           fabs(g->y) <= NDP_GOAL_MAX_POS && isfinite(g->yaw) &&
-           fabs(g->yaw) <= NDP_GOAL_MAX_YAW, "goal (%g, %g, %g) out of range", g->x, g->y,
+static void fz_goal_ok(const nd_goal *g) {
+  FZ_CHECK(isfinite(g->x) && fabs(g->x) <= ND_GOAL_MAX_POS && isfinite(g->y) &&
+           fabs(g->y) <= ND_GOAL_MAX_POS && isfinite(g->yaw) &&
+           fabs(g->yaw) <= ND_GOAL_MAX_YAW, "goal (%g, %g, %g) out of range", g->x, g->y,
            g->yaw);
   /* 0 means "the runner's default"; a given value is in range. */
   FZ_CHECK(g->eps == 0 || (g->eps > 0 && g->eps <= 1.0), "eps %g", g->eps);
-  FZ_CHECK(g->tau == 0 || (g->tau > 0 && g->tau <= NDP_GOAL_MAX_TAU), "tau %g", g->tau);
+  FZ_CHECK(g->tau == 0 || (g->tau > 0 && g->tau <= ND_GOAL_MAX_TAU), "tau %g", g->tau);
   FZ_CHECK(g->tau == 0 || g->eps != 0, "a time limit without eps cannot be written");
 }
 
@@ -33,8 +33,8 @@ static void fz_arg(const uint8_t *data, size_t size) {
   const size_t alen = size < sizeof arg - 1 ? size : sizeof arg - 1;
   memcpy(arg, data, alen);
   arg[alen] = 0;
-  ndp_goal g;
-  if (ndp_goal_parse_arg(arg, &g, err, sizeof err) == 0) {
+  nd_goal g;
+  if (nd_goal_parse_arg(arg, &g, err, sizeof err) == 0) {
     fz_goal_ok(&g);
     FZ_CHECK(g.line == 0, "command-line goal has line %d", g.line);
   } else {
@@ -44,12 +44,12 @@ static void fz_arg(const uint8_t *data, size_t size) {
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
   fz_arg(data, size);
-  ndp_goal out[FZ_CAP + 1];
+  nd_goal out[FZ_CAP + 1];
   memset(out, 0xA5, sizeof out);
-  const ndp_goal guard = out[FZ_CAP];
+  const nd_goal guard = out[FZ_CAP];
   char err[512];
   int n = 0;
-  const int rc = ndp_goals_parse((const char *)data, size, "fz.goals", out, FZ_CAP, &n, err,
+  const int rc = nd_goal_list_parse((const char *)data, size, "fz.goals", out, FZ_CAP, &n, err,
                                  sizeof err);
   FZ_CHECK(rc == 0 || rc == -1, "rc %d", rc);
   FZ_CHECK(n >= 0 && n <= FZ_CAP, "n = %d", n);
@@ -69,7 +69,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
   static char text[FZ_CAP * 256];  /* a line is at most 5 x 24 + 5 bytes */
   size_t len = 0;
   for (int i = 0; i < n; i++) {
-    const ndp_goal *g = &out[i];
+    const nd_goal *g = &out[i];
     len += (size_t)snprintf(text + len, sizeof text - len, "%.17g %.17g %.17g", g->x, g->y,
                             g->yaw);
     if (g->eps != 0) len += (size_t)snprintf(text + len, sizeof text - len, " %.17g", g->eps);
@@ -77,9 +77,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     len += (size_t)snprintf(text + len, sizeof text - len, "\n");
   }
   FZ_CHECK(len < sizeof text, "printed goals truncated");
-  ndp_goal back[FZ_CAP];
+  nd_goal back[FZ_CAP];
   int m = 0;
-  FZ_CHECK(ndp_goals_parse(text, len, "printed", back, FZ_CAP, &m, err, sizeof err) == 0,
+  FZ_CHECK(nd_goal_list_parse(text, len, "printed", back, FZ_CAP, &m, err, sizeof err) == 0,
            "printed goals refused: %s", err);
   FZ_CHECK(m == n, "%d goals printed, %d parsed back", n, m);
   for (int i = 0; i < n; i++)

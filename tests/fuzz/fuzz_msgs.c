@@ -6,7 +6,7 @@
  * (lcm-gen 1.3.1's own decoders for those trust the length words; see ndp_validate.h).
  * A decoded message must re-encode to the bytes it came from and go through its
  * validator; whatever a validator accepts must lie inside the bounds ndp_validate.h
- * states. The adapter's parameter-history entry decoder (ndp_history.h) gets the same
+ * states. The adapter's parameter-history entry decoder (nd_history.h) gets the same
  * bytes. Decode, validate, clean up: any leak or bad access is a finding. */
 #include <limits.h>
 #include <math.h>
@@ -14,7 +14,7 @@
 
 #include "fuzz.h"
 #include "ndp.h"
-#include "ndp_history.h"
+#include "nd_history.h"
 #include "ndp_validate.h"
 
 #define FZ_MAX_ENC 16384  /* beyond any encoding: the strings are refused above 4096 */
@@ -176,15 +176,15 @@ static void fz_status(const uint8_t *d, int len) {
 /* ---- the adapter's history entry ---- */
 
 static void fz_history(const uint8_t *d, size_t len) {
-  ndp_history_entry e;
+  nd_history_entry e;
   char why[256] = "";
-  if (ndp_history_decode(&e, d, len, why, sizeof why)) {
+  if (nd_history_decode(&e, d, len, why, sizeof why)) {
     FZ_CHECK(why[0] != 0, "history: refused without a reason");
     return;
   }
-  FZ_CHECK(ndp_history_check(&e, why, sizeof why) == 0, "history: decoded invalid: %s", why);
-  uint8_t out[NDP_HISTORY_ENC_SIZE];
-  FZ_CHECK(ndp_history_encode(&e, out, why, sizeof why) == 0, "history: %s", why);
+  FZ_CHECK(nd_history_check(&e, why, sizeof why) == 0, "history: decoded invalid: %s", why);
+  uint8_t out[ND_HISTORY_ENC_SIZE];
+  FZ_CHECK(nd_history_encode(&e, out, why, sizeof why) == 0, "history: %s", why);
   FZ_CHECK(len == sizeof out && memcmp(out, d, len) == 0, "history: re-encodes differently");
 }
 

@@ -1,5 +1,5 @@
 /* Fuzz target: the replay buffer on disk (core/nd_rfile.h, nd_rbuf.h, nd_rollout.h) and
- * the parameter history that shares its framing (processes/ndp_history.h).
+ * the parameter history that shares its framing (processes/nd_history.h).
  *
  * The input is the whole content of a record file. It is written to a scratch file and
  * read through every reader (raw records, rollouts one by one, all rollouts at once, the
@@ -25,7 +25,7 @@
 
 #include "fuzz.h"
 #include "nd_rbuf.h"
-#include "ndp_history.h"
+#include "nd_history.h"
 
 /* ---- scratch files: one private directory per process, on tmpfs when there is one, so
  * that the writer's fdatasync costs nothing. The code under test opens them by name, as
@@ -214,11 +214,11 @@ static int fz_rollout(const uint8_t *d, size_t len) {
 }
 
 static int fz_history(const uint8_t *d, size_t len) {
-  ndp_history_entry e;
+  nd_history_entry e;
   char why[256];
-  if (ndp_history_decode(&e, d, len, why, sizeof why)) return 0;
-  uint8_t out[NDP_HISTORY_ENC_SIZE];
-  FZ_CHECK(ndp_history_encode(&e, out, why, sizeof why) == 0, "%s", why);
+  if (nd_history_decode(&e, d, len, why, sizeof why)) return 0;
+  uint8_t out[ND_HISTORY_ENC_SIZE];
+  FZ_CHECK(nd_history_encode(&e, out, why, sizeof why) == 0, "%s", why);
   FZ_CHECK(len == sizeof out && memcmp(out, d, len) == 0, "history entry re-encodes "
            "differently");
   return 1;
@@ -335,8 +335,8 @@ static void fz_readers(const uint8_t *d, size_t size, const fz_model *m) {
   }
 
   /* The history scan: bad records are counted, not fatal. */
-  ndp_history_summary s;
-  const int hs = ndp_history_scan(fz_in, &s, err, sizeof err);
+  nd_history_summary s;
+  const int hs = nd_history_scan(fz_in, &s, err, sizeof err);
   FZ_CHECK((hs == 0) == (m->kind == ND_RFILE_KIND_PARAMS), "history scan %d of kind %u: %s",
            hs, m->kind, err);
   if (hs == 0) {
@@ -345,7 +345,7 @@ static void fz_readers(const uint8_t *d, size_t size, const fz_model *m) {
              s.tail.offset == (int64_t)m->end, "history scan: %lld entries + %lld bad, "
              "model %lld of %lld", (long long)s.entries, (long long)s.bad,
              (long long)entries, (long long)m->count);
-    FZ_CHECK(!s.have_last || ndp_history_check(&s.last, err, sizeof err) == 0, "%s", err);
+    FZ_CHECK(!s.have_last || nd_history_check(&s.last, err, sizeof err) == 0, "%s", err);
     FZ_CHECK((s.bad == 0) == (s.first_bad[0] == 0), "first_bad inconsistent");
   }
 }

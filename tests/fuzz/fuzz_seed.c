@@ -15,7 +15,7 @@
 #include <zlib.h>
 
 #include "nd_rbuf.h"
-#include "ndp_history.h"
+#include "nd_history.h"
 #include "ndp_validate.h"
 
 static const char *root;
@@ -106,12 +106,12 @@ static void seed_rbuf(void) {
   unlink(p);
   if (nd_rfile_open_append(&w, p, ND_RFILE_KIND_PARAMS, NULL, err, sizeof err)) die(err);
   for (int v = 1; v <= 2; v++) {
-    ndp_history_entry e = {.version = v, .utime = 1795496794000000 + v,
+    nd_history_entry e = {.version = v, .utime = 1795496794000000 + v,
                            .buffer_created = 1795496793000000, .mask = 7,
                            .mean = {0.8, 0.004, 1e-4, 0.1}, .std = {0.05, 1e-3, 2e-5, 0},
                            .loss = 0.01 / v, .fit_time = 2.5, .buffer_size = v};
-    unsigned char b[NDP_HISTORY_ENC_SIZE];
-    if (ndp_history_encode(&e, b, err, sizeof err) ||
+    unsigned char b[ND_HISTORY_ENC_SIZE];
+    if (nd_history_encode(&e, b, err, sizeof err) ||
         nd_rfile_append(&w, ND_RFILE_KIND_PARAMS, b, sizeof b, err, sizeof err))
       die(err);
     if (v == 1) put("fuzz_msgs", "history_entry.bin", b, sizeof b);

@@ -1,0 +1,181 @@
+/* nd_history: encoding and reading the adapter's parameter history. */
+#include "nd_history.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+#include <sys/stat.h>
+
+static const char *names[ND_NTHETA] = {"sliding friction", "torsional friction",
+                                                 "rolling friction", "sphere mass"};
+
+int nd_history_check(const nd_history_entry *e, char *err, int errlen) {
+  if (e->mask < 1 || e->mask > 15) {
+    snprintf(err, errlen, "fit mask %u: must be in [1, 15]", (unsigned)e->mask);
+    return -1;
+  }
+  if (e->version < 1) {
+    snprintf(err, errlen, "version %lld: must be >= 1", (long long)e->version);
+    return -1;
+  }
+  if (e->utime <= 0) {
+    snprintf(err, errlen, "utime %lld: not a time", (long long)e->utime);
+    return -1;
+  }
+  if (e->buffer_created < 0) {
+    snprintf(err, errlen, "buffer_created %lld: negative", (long long)e->buffer_created);
+    return -1;
+  }
+  for (int i = 0; i < ND_NTHETA; i++) {
+    const double m = e->mean[i], s = e->std[i];
+    const int held = !(e->mask & (1u << i));
+    if (!isfinite(m) || m < 0.0 || (i == 3 && m <= 0.0) || m > ND_THETA_MAX) {
+      snprintf(err, errlen, "mean[%d] (%s) = %g: not a valid value", i, names[i], m);
+      return -1;
+    }
+    if (!isfinite(s) || s < 0.0 || (held && s != 0.0)) {
+      snprintf(err, errlen, "std[%d] (%s) = %g: must be finite and >= 0, and 0 when held", i,
+               names[i], s);
+      return -1;
+    }
+  }
+  if (!isfinite(e->loss) || e->loss < 0.0) {
+    snprintf(err, errlen, "loss %g: must be finite and >= 0", e->loss);
+    return -1;
+  }
+  if (!isfinite(e->fit_time) || e->fit_time < 0.0) {
+    snprintf(err, errlen, "fit_time %g: must be finite and >= 0", e->fit_time);
+    return -1;
+  }
+  if (e->buffer_size < 1) {
+    snprintf(err, errlen, "buffer_size %d: must be >= 1", (int)e->buffer_size);
+    return -1;
+  }
+  return 0;
+}
+
+/* Little-endian by shifts: the file must read the same on any host. */
+static void put_u32(unsigned char *p, uint32_t v) {
+  for (int i = 0; i < 4; i++) p[i] = (unsigned char)(v >> (8 * i));
+}
+static void put_u64(unsigned char *p, uint64_t v) {
+  for (int i = 0; i < 8; i++) p[i] = (unsigned char)(v >> (8 * i));
+}
+static void put_f64(unsigned char *p, double d) {
+  uint64_t v;
+  memcpy(&v, &d, sizeof(v));
+  put_u64(p, v);
+}
+static uint32_t get_u32(const unsigned char *p) {
+  uint32_t v = 0;
+  for (int i = 0; i < 4; i++) v |= (uint32_t)p[i] << (8 * i);
+  return v;
+}
+static uint64_t get_u64(const unsigned char *p) {
+  uint64_t v = 0;
+  for (int i = 0; i < 8; i++) v |= (uint64_t)p[i] << (8 * i);
+  return v;
+}
+static double get_f64(const unsigned char *p) {
+  uint64_t v = get_u64(p);
+  double d;
+  memcpy(&d, &v, sizeof(d));
+  return d;
+}
+
+int nd_history_encode(const nd_history_entry *e, unsigned char buf[ND_HISTORY_ENC_SIZE],
+                       char *err, int errlen) {
+  char why[200];
+  if (nd_history_check(e, why, sizeof(why))) {
+    snprintf(err, errlen, "history entry not encoded: %s", why);
+    return -1;
+  }
+  put_u32(buf + 0, ND_HISTORY_ENC_VERSION);
+  put_u32(buf + 4, e->mask);
+  put_u64(buf + 8, (uint64_t)e->version);
+  put_u64(buf + 16, (uint64_t)e->utime);
+  put_u64(buf + 24, (uint64_t)e->buffer_created);
+  for (int i = 0; i < ND_NTHETA; i++) {
+    put_f64(buf + 32 + 8 * i, e->mean[i]);
+    put_f64(buf + 64 + 8 * i, e->std[i]);
+  }
+  put_f64(buf + 96, e->loss);
+  put_f64(buf + 104, e->fit_time);
+  put_u32(buf + 112, (uint32_t)e->buffer_size);
+  put_u32(buf + 116, 0);
+  return 0;
+}
+
+int nd_history_decode(nd_history_entry *e, const unsigned char *buf, size_t len, char *err,
+                       int errlen) {
+  if (len != ND_HISTORY_ENC_SIZE) {
+    snprintf(err, errlen, "history entry of %zu bytes, expected %d", len,
+             ND_HISTORY_ENC_SIZE);
+    return -1;
+  }
+  const uint32_t ver = get_u32(buf);
+  if (ver != ND_HISTORY_ENC_VERSION) {
+    snprintf(err, errlen, "history entry encoding version %u, expected %d", (unsigned)ver,
+             ND_HISTORY_ENC_VERSION);
+    return -1;
+  }
+  const uint32_t reserved = get_u32(buf + 116);
+  if (reserved != 0) {
+    snprintf(err, errlen, "history entry reserved field is %08x, expected 0",
+             (unsigned)reserved);
+    return -1;
+  }
+  memset(e, 0, sizeof(*e));
+  e->mask = get_u32(buf + 4);
+  e->version = (int64_t)get_u64(buf + 8);
+  e->utime = (int64_t)get_u64(buf + 16);
+  e->buffer_created = (int64_t)get_u64(buf + 24);
+  for (int i = 0; i < ND_NTHETA; i++) {
+    e->mean[i] = get_f64(buf + 32 + 8 * i);
+    e->std[i] = get_f64(buf + 64 + 8 * i);
+  }
+  e->loss = get_f64(buf + 96);
+  e->fit_time = get_f64(buf + 104);
+  e->buffer_size = (int32_t)get_u32(buf + 112);
+  char why[200];
+  if (nd_history_check(e, why, sizeof(why))) {
+    snprintf(err, errlen, "history entry: %s", why);
+    return -1;
+  }
+  return 0;
+}
+
+int nd_history_scan(const char *path, nd_history_summary *s, char *err, int errlen) {
+  memset(s, 0, sizeof(*s));
+  struct stat st;
+  if (stat(path, &st) != 0 && errno == ENOENT) return 0;
+  nd_rfile_reader rd;
+  if (nd_rfile_reader_open(&rd, path, ND_RFILE_KIND_PARAMS, err, errlen)) return -1;
+  int rc = 0;
+  for (;;) {
+    nd_rfile_record rec;
+    const int k = nd_rfile_next(&rd, &rec, &s->tail, err, errlen);
+    if (k < 0) {
+      rc = -1;
+      break;
+    }
+    if (k == 0) break;
+    nd_history_entry e;
+    char why[200];
+    if (rec.kind != ND_RFILE_KIND_PARAMS) {
+      snprintf(why, sizeof(why), "record kind %u, expected %d", (unsigned)rec.kind,
+               ND_RFILE_KIND_PARAMS);
+    } else if (nd_history_decode(&e, rec.data, rec.len, why, sizeof(why)) == 0) {
+      s->entries++;
+      if (!s->have_last || e.version >= s->last.version) s->last = e;
+      s->have_last = 1;
+      continue;
+    }
+    if (s->bad++ == 0)
+      snprintf(s->first_bad, sizeof(s->first_bad), "record at offset %lld: %s",
+               (long long)rec.offset, why);
+  }
+  nd_rfile_reader_close(&rd);
+  return rc;
+}

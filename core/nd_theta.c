@@ -1,0 +1,83 @@
+/* nd_theta: names, bounds and parsing of theta. */
+#include "nd_theta.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "nd_parse.h"
+
+const double nd_theta_true[ND_NTHETA] = {1.0, 0.005, 0.0001, 1.0};
+const char *const nd_theta_name[ND_NTHETA] = {"sliding friction", "torsional friction",
+                                              "rolling friction", "sphere mass"};
+const char *const nd_theta_key[ND_NTHETA] = {"slide", "torsion", "roll", "mass"};
+const char *const nd_theta_unit[ND_NTHETA] = {"", "m", "m", "kg"};
+
+int nd_theta_check(const double theta[ND_NTHETA], char *err, int errlen) {
+  for (int i = 0; i < ND_NTHETA; i++) {
+    const double v = theta[i];
+    const int mass = i == ND_TH_MASS;
+    if (!isfinite(v) || (mass ? v <= 0 : v < 0) || v > ND_THETA_MAX) {
+      snprintf(err, errlen, "theta[%d] (%s) = %g: must be finite, %s and <= %g", i,
+               nd_theta_name[i], v, mass ? "> 0" : ">= 0", ND_THETA_MAX);
+      return -1;
+    }
+  }
+  return 0;
+}
+
+int nd_theta_parse(const char *s, const char *what, double theta[ND_NTHETA], char *err,
+                   int errlen) {
+  double v[ND_NTHETA];
+  if (nd_parse_list(s, what, ND_NTHETA, 0.0, ND_THETA_MAX, v, err, errlen)) return -1;
+  /* The list's range admits a zero mass; the message must still name the option. */
+  char why[160];
+  if (nd_theta_check(v, why, sizeof(why))) {
+    snprintf(err, errlen, "%s: %s", what, why);
+    return -1;
+  }
+  memcpy(theta, v, sizeof(v));
+  return 0;
+}
+
+int nd_theta_parse_mask(const char *s, const char *what, unsigned *mask, char *err,
+                        int errlen) {
+  unsigned m = 0;
+  const char *p = s;
+  for (;;) {
+    const size_t n = strcspn(p, ",");
+    int i = 0;
+    while (i < ND_NTHETA && !(strlen(nd_theta_key[i]) == n && !strncmp(p, nd_theta_key[i], n)))
+      i++;
+    if (n == 0) {
+      snprintf(err, errlen, "%s: '%s': no parameter named (slide, torsion, roll, mass)", what,
+               s);
+      return -1;
+    }
+    if (i == ND_NTHETA) {
+      snprintf(err, errlen, "%s: unknown parameter '%.*s' (slide, torsion, roll, mass)", what,
+               (int)(n > 40 ? 40 : n), p);
+      return -1;
+    }
+    if (m & (1u << i)) {
+      snprintf(err, errlen, "%s: '%s' given twice", what, nd_theta_key[i]);
+      return -1;
+    }
+    m |= 1u << i;
+    if (!p[n]) break;
+    p += n + 1;
+  }
+  *mask = m;
+  return 0;
+}
+
+void nd_theta_mask_str(unsigned mask, char *buf, int len) {
+  int at = 0;
+  if (len > 0) buf[0] = '\0';
+  for (int i = 0; i < ND_NTHETA && at < len; i++)
+    if (mask & (1u << i)) {
+      const int n = snprintf(buf + at, (size_t)(len - at), "%s%s", at ? "," : "", nd_theta_key[i]);
+      if (n < 0) break;
+      at += n;
+    }
+}

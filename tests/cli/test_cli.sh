@@ -1,0 +1,484 @@
+#!/usr/bin/env bash
+# test_cli: every program's command line refuses bad input before doing anything, and no
+# argument is ever read by a shell.
+#
+#   bash test_cli.sh BUILD_DIR
+#
+# 1. Every C program, every option that takes a value: a missing value, an empty one, a
+#    word, NaN, inf, trailing junk and an out-of-range number each exit with status 2 and a
+#    line "nudge-X: ..." on stderr naming the option and the bad value; unknown options and
+#    stray words too; --help and -h exit 0 with the usage on stdout. LCM_DEFAULT_URL names
+#    a transport that does not exist, so a program that opened LCM before checking its
+#    arguments would fail with status 1 ("cannot open LCM") and this test with it: no
+#    network is needed, and none is touched.
+# 2. Input files named on the command line: a missing or malformed --model (nudge-bridge)
+#    and --goals file (nudge-tasks) give status 2 and a message naming the file.
+# 3. nudge-up's own options; then nudge-up run against stand-in programs (tiny scripts in
+#    a scratch bin dir that record their argv): arguments with spaces, quotes, ';', $(..),
+#    backquotes, globs and empty strings reach the processes and the task runner literally
+#    and nothing is executed; --workspace reaches planner, executor and bridge; a process
+#    that refuses its arguments makes nudge-up exit 2.
+#    These runs are under umask 000: nothing in the log directory may be world-writable,
+#    and the processes must inherit a umask without o+w.
+# 4. nudge-spy passes its arguments to java (a stand-in) literally.
+set -u
+PT_NAME=test_cli
+. "$(dirname "${BASH_SOURCE[0]}")/../tools/process-lib.sh"
+
+BUILD=${1:?usage: test_cli.sh BUILD_DIR}
+BIN=$(cd "$BUILD/bin" && pwd) || exit 1
+for p in bridge executor planner adapter tasks status demo experiment up spy; do
+  [[ -x $BIN/nudge-$p ]] || { echo "test_cli: $BIN/nudge-$p is missing: build first" >&2; exit 1; }
+done
+PT_WORK=$(mktemp -d "${TMPDIR:-/tmp}/nudge-test_cli.XXXXXX") || exit 1
+W=$PT_WORK
+STARTED=()   # pids of nudge-up runs, for the EXIT trap
+cleanup() {
+  local p
+  for p in "${STARTED[@]}"; do kill -KILL "$p" 2>/dev/null; done
+  [[ -f $W/fake.pids ]] && while read -r p _; do kill -KILL "$p" 2>/dev/null; done <"$W/fake.pids"
+  [[ -n ${KEEP_WORK:-} ]] || rm -rf -- "$W"
+}
+trap cleanup EXIT
+cd "$W" || exit 1   # a program that wrongly runs writes here, not into the tree
+export LCM_DEFAULT_URL='nudge-no-such-transport://'
+NCASES=0
+
+# bad PROG 'WANT...' ARGS...: PROG ARGS exits 2 within 20 s, stdout stays empty, and the
+# first line on stderr is "PROG: ..." containing every '|'-separated part of WANT.
+bad() {
+  local prog=$1 want=$2 rc first="" part miss=""
+  shift 2
+  NCASES=$((NCASES + 1))
+  timeout 20 "$BIN/$prog" "$@" </dev/null >"$W/out" 2>"$W/err"
+  rc=$?
+  read -r first <"$W/err"
+  IFS='|' read -r -a parts <<<"$want"
+  for part in "${parts[@]}"; do [[ $first == *"$part"* ]] || miss+=" '$part'"; done
+  local shown
+  printf -v shown '%q ' "$@"
+  if ((rc == 2)) && [[ $first == "$prog: "* && -z $miss && ! -s $W/out ]]; then
+    pt_ok "$prog ${shown% }: status 2: $first"
+  else
+    pt_fail "$prog ${shown% }: status $rc (want 2), stderr '$first'${miss:+, lacks$miss}$([[ -s $W/out ]] && echo ', wrote to stdout')"
+  fi
+}
+
+# help PROG: --help and -h exit 0, usage on stdout, nothing on stderr.
+help() {
+  local prog=$1 flag rc
+  for flag in --help -h; do
+    NCASES=$((NCASES + 1))
+    timeout 20 "$BIN/$prog" "$flag" </dev/null >"$W/out" 2>"$W/err"
+    rc=$?
+    if ((rc == 0)) && [[ $(head -n 1 "$W/out") == "usage: $prog"* && ! -s $W/err ]]; then
+      pt_ok "$prog $flag: status 0, usage on stdout"
+    else
+      pt_fail "$prog $flag: status $rc, stdout '$(head -n 1 "$W/out")', stderr '$(head -n 1 "$W/err")'"
+    fi
+  done
+}
+
+# Option kinds. Each bad value is given alone (the other options at their defaults) and
+# must be named in the message together with the option.
+num_cases() { # PROG OPT OUT_OF_RANGE: a real number option
+  local prog=$1 opt=$2 oor=$3
+  bad "$prog" "$opt|abc" "$opt" abc
+  bad "$prog" "$opt|nan" "$opt" nan
+  bad "$prog" "$opt|inf" "$opt" inf
+  bad "$prog" "$opt|-inf" "$opt" -inf
+  bad "$prog" "$opt|0.5s" "$opt" 0.5s
+  bad "$prog" "$opt|empty" "$opt" ''
+  bad "$prog" "$opt|out of range" "$opt" "$oor"
+  bad "$prog" "$opt needs a value" "$opt"
+}
+int_cases() { # PROG OPT OUT_OF_RANGE: an integer option
+  local prog=$1 opt=$2 oor=$3
+  bad "$prog" "$opt|abc" "$opt" abc
+  bad "$prog" "$opt|nan" "$opt" nan
+  bad "$prog" "$opt|1.5" "$opt" 1.5
+  bad "$prog" "$opt|99999999999999999999" "$opt" 99999999999999999999
+  bad "$prog" "$opt|empty" "$opt" ''
+  bad "$prog" "$opt|out of range" "$opt" "$oor"
+  bad "$prog" "$opt needs a value" "$opt"
+}
+seed_cases() { # PROG OPT: an unsigned 64-bit option
+  local prog=$1 opt=$2
+  bad "$prog" "$opt|-1" "$opt" -1
+  bad "$prog" "$opt|abc" "$opt" abc
+  bad "$prog" "$opt|1e3" "$opt" 1e3
+  bad "$prog" "$opt|18446744073709551616" "$opt" 18446744073709551616
+  bad "$prog" "$opt needs a value" "$opt"
+}
+list_cases() { # PROG OPT GOOD OUT_OF_RANGE_FIRST: a comma list like GOOD
+  local prog=$1 opt=$2 good=$3 oor=$4 rest=${3#*,} n
+  n=$(($(tr -cd , <<<"$good" | wc -c) + 1))
+  bad "$prog" "$opt|'nan' is not a finite number" "$opt" "nan,$rest"
+  bad "$prog" "$opt|'inf' is not a finite number" "$opt" "inf,$rest"
+  bad "$prog" "$opt|'x' is not a finite number" "$opt" "x,$rest"
+  bad "$prog" "$opt|out of range" "$opt" "$oor,$rest"
+  bad "$prog" "$opt|expected $n comma-separated numbers|${good%,*}" "$opt" "${good%,*}"
+  bad "$prog" "$opt|expected $n comma-separated numbers|$good,1" "$opt" "$good,1"
+  bad "$prog" "$opt|expected $n comma-separated numbers|${good//,/;}" "$opt" "${good//,/;}"
+  bad "$prog" "$opt needs a value" "$opt"
+}
+theta_cases() { # PROG OPT: S,T,R,M; beyond the list checks: a zero or negative mass
+  list_cases "$1" "$2" 1,0.005,0.0001,1 -0.1
+  bad "$1" "$2|sphere mass|= 0" "$2" 1,0.005,0.0001,0
+  bad "$1" "$2|-2 is out of range" "$2" 1,0.005,0.0001,-2
+}
+common_cases() { # PROG: what every program refuses
+  local prog=$1
+  help "$prog"
+  bad "$prog" "unknown|--bogus" --bogus
+  bad "$prog" "unknown|--bogus" --bogus 1
+  bad "$prog" "unknown|stray" stray
+  bad "$prog" "unknown|-x" -x
+  bad "$prog" "unknown|--help=1" --help=1
+}
+
+# --- 1. the C programs ---------------------------------------------------------------
+
+common_cases nudge-bridge
+num_cases nudge-bridge --rate 10
+num_cases nudge-bridge --mocap-hz 0
+num_cases nudge-bridge --cmd-timeout 0
+num_cases nudge-bridge --seconds 0
+theta_cases nudge-bridge --theta
+list_cases nudge-bridge --object 0,0,0 20
+list_cases nudge-bridge --ee -0.1,0 -20
+bad nudge-bridge "--mode hardware is not available" --mode hardware
+bad nudge-bridge "--lcm-url needs a value" --lcm-url
+bad nudge-bridge "--model needs a value" --model
+bad nudge-bridge "unknown|--threads" --threads 2
+bad nudge-bridge "--mocap-hz 2000 exceeds|1000" --mocap-hz 2000
+bad nudge-bridge "the sphere at --ee 0,0|overlaps the object" --ee 0,0
+list_cases nudge-bridge --workspace -0.5,-0.5,0.5,0.5 -20
+bad nudge-bridge "--workspace|'0.5,-0.5,-0.5,0.5' is not a box|XLO < XHI" --workspace 0.5,-0.5,-0.5,0.5
+bad nudge-bridge "--workspace|'-0.5,0.5,0.5,0.5' is not a box" --workspace -0.5,0.5,0.5,0.5
+bad nudge-bridge "--ee 0.7,0 starts outside the workspace" --ee 0.7,0
+bad nudge-bridge "--ee -0.1,0 starts outside the workspace|(--workspace)" --workspace 0,0,0.5,0.5
+
+common_cases nudge-executor
+num_cases nudge-executor --rate 0.5
+num_cases nudge-executor --timeout 0
+num_cases nudge-executor --v-max 100
+num_cases nudge-executor --a-max 1e4
+num_cases nudge-executor --j-max 1e7
+list_cases nudge-executor --workspace -0.5,-0.5,0.5,0.5 -20
+bad nudge-executor "--workspace|'0.5,-0.5,-0.5,0.5' is not a box|XLO < XHI" --workspace 0.5,-0.5,-0.5,0.5
+bad nudge-executor "--workspace|'-0.5,0.5,0.5,0.5' is not a box" --workspace -0.5,0.5,0.5,0.5
+bad nudge-executor "--workspace|'0,0,0,0' is not a box" --workspace 0,0,0,0
+bad nudge-executor "--lcm-url needs a value" --lcm-url
+
+common_cases nudge-planner
+int_cases nudge-planner --threads 0
+int_cases nudge-planner --pop 3
+int_cases nudge-planner --iters 101
+num_cases nudge-planner --plan-dt 0.02
+seed_cases nudge-planner --seed
+num_cases nudge-planner --max-rate 0
+num_cases nudge-planner --state-timeout 0
+theta_cases nudge-planner --theta
+list_cases nudge-planner --workspace -0.5,-0.5,0.5,0.5 -20
+bad nudge-planner "--workspace|'0.5,-0.5,-0.5,0.5' is not a box" --workspace 0.5,-0.5,-0.5,0.5
+bad nudge-planner "--lcm-url needs a value" --lcm-url
+
+common_cases nudge-adapter
+int_cases nudge-adapter --threads 0
+int_cases nudge-adapter --nice 20
+num_cases nudge-adapter --prior-d 0
+num_cases nudge-adapter --replay-dt 1
+num_cases nudge-adapter --replay-window -1
+num_cases nudge-adapter --robust 2
+bad nudge-adapter "--threads|out of range" --replay-window 0 --threads 0
+seed_cases nudge-adapter --seed
+theta_cases nudge-adapter --theta
+theta_cases nudge-adapter --prior-ref
+bad nudge-adapter "--fit|unknown parameter 'friction'" --fit slide,friction
+bad nudge-adapter "--fit|'slide' given twice" --fit slide,slide
+bad nudge-adapter "--fit|no parameter" --fit ,
+bad nudge-adapter "--replay-mode|'xx'" --replay-mode xx
+bad nudge-adapter "--buffer FILE is required"
+bad nudge-adapter "--buffer FILE is required" --buffer ''
+bad nudge-adapter "--buffer needs a value" --buffer
+bad nudge-adapter "--history: empty file name" --buffer x.nrb --history ''
+bad nudge-adapter "--prior-ref|slide is fitted|> 0" --buffer x.nrb --prior-ref 0,0.005,0.0001,1
+bad nudge-adapter "--lcm-url needs a value" --lcm-url
+
+common_cases nudge-tasks
+num_cases nudge-tasks --eps 2
+num_cases nudge-tasks --tau 0
+num_cases nudge-tasks --workspace 0
+num_cases nudge-tasks --wait -1
+num_cases nudge-tasks --settle -1
+num_cases nudge-tasks --record-dt 1
+num_cases nudge-tasks --await-fit -1
+theta_cases nudge-tasks --theta
+bad nudge-tasks "--goal|'nan,0,0'|x: 'nan' is not a finite number" --goal nan,0,0
+bad nudge-tasks "--goal|'0,inf,0'" --goal 0,inf,0
+bad nudge-tasks "--goal|'20,0,0'|x = 20 m is beyond 10 m" --goal 20,0,0
+bad nudge-tasks "--goal|'0.1,0,90'|yaw" --goal 0.1,0,90
+bad nudge-tasks "--goal|'1,2'|expected X,Y,YAW" --goal 1,2
+bad nudge-tasks "--goal|'1,2,3,4,5,6'" --goal 1,2,3,4,5,6
+bad nudge-tasks "--goal|'0.1,0,0,0'|eps" --goal 0.1,0,0,0
+bad nudge-tasks "--goal needs a value" --goal
+bad nudge-tasks "--record: empty file name" --record ''
+bad nudge-tasks "--await-fit needs --record" --await-fit 5
+bad nudge-tasks "--lcm-url needs a value" --lcm-url
+
+common_cases nudge-status
+int_cases nudge-status --pid 0
+int_cases nudge-status --count 0
+num_cases nudge-status --timeout -1
+bad nudge-status "--wait: empty name" --wait ''
+bad nudge-status "--wait needs a value" --wait
+bad nudge-status "--lcm-url needs a value" --lcm-url
+
+common_cases nudge-demo
+seed_cases nudge-demo --seed
+int_cases nudge-demo --pop 3
+int_cases nudge-demo --iters 0
+int_cases nudge-demo --threads 0
+int_cases nudge-demo --goals 6
+num_cases nudge-demo --plan-dt 1
+num_cases nudge-demo --tau 0
+bad nudge-demo "unknown|--lcm-url" --lcm-url x
+
+common_cases nudge-experiment
+int_cases nudge-experiment --runs 0
+int_cases nudge-experiment --episodes 0
+seed_cases nudge-experiment --seed
+int_cases nudge-experiment --threads 0
+int_cases nudge-experiment --pop 3
+int_cases nudge-experiment --iters 0
+num_cases nudge-experiment --tau 0
+int_cases nudge-experiment --eval-tasks 6
+num_cases nudge-experiment --plan-dt 1
+num_cases nudge-experiment --window -1
+num_cases nudge-experiment --step-std -1
+num_cases nudge-experiment --step-gate -1
+num_cases nudge-experiment --rel-floor 1
+num_cases nudge-experiment --rot-weight 2
+num_cases nudge-experiment --robust 2
+# A good --window is taken (the refusal is the next option's).
+bad nudge-experiment "--runs|out of range" --window 0 --runs 0
+bad nudge-experiment "--d|out of range" --d 0,1
+bad nudge-experiment "--d|nan" --d nan
+bad nudge-experiment "--replay|'xx'" --replay xx
+bad nudge-experiment "--out DIR is required" --runs 1
+bad nudge-experiment "--out needs a value" --out
+[[ -z $(ls -A "$W" | grep -v -e '^out$' -e '^err$') ]] ||
+  pt_fail "a refused program created files: $(ls -A "$W")"
+
+# --- 2. input files named by options -------------------------------------------------
+
+bad nudge-bridge "cannot open --model|$W/none.xml|No such file" --model "$W/none.xml"
+bad nudge-bridge "cannot open --model" --model ''
+printf '<mujoco><worldbody>' >"$W/cut.xml"
+bad nudge-bridge "cannot use --model|$W/cut.xml|XML" --model "$W/cut.xml"
+printf '\x7fELF\x02\x01\x01\x00\x00\x00' >"$W/binary.xml"
+bad nudge-bridge "cannot use --model|$W/binary.xml" --model "$W/binary.xml"
+printf '<mujoco><worldbody><body name="object"><freejoint/><geom size=".1"/></body></worldbody></mujoco>\n' >"$W/noee.xml"
+bad nudge-bridge "cannot use --model|$W/noee.xml|no body named \"ee\"" --model "$W/noee.xml"
+mkdir "$W/dir.xml"
+bad nudge-bridge "--model|$W/dir.xml" --model "$W/dir.xml"
+rmdir "$W/dir.xml"
+# A usable scene, at a timestep no real-time world can step; the same at 1 ms passes every
+# check and fails only at LCM (status 1): the refusals above are the files', not the test's.
+scene() { # TIMESTEP
+  printf '<mujoco><option timestep="%s"/><worldbody>
+  <body name="object" pos="0 0 0.025"><freejoint/><geom type="box" size=".05 .03 .025" mass=".5"/></body>
+  <body name="ee" pos="-0.1 0 0.025"><joint name="ee_x" type="slide" axis="1 0 0"/>
+    <joint name="ee_y" type="slide" axis="0 1 0"/><geom type="sphere" size=".025" mass="1"/></body>
+</worldbody></mujoco>\n' "$1"
+}
+scene 0.00001 >"$W/fast.xml"
+bad nudge-bridge "--model $W/fast.xml: timestep 1e-05 s is outside|give --rate" --model "$W/fast.xml"
+scene 0.001 >"$W/ok.xml"
+NCASES=$((NCASES + 1))
+timeout 20 "$BIN/nudge-bridge" --model "$W/ok.xml" </dev/null >"$W/out" 2>"$W/err"
+rc=$?
+pt_check "a usable --model passes its checks and fails only at LCM (status $rc)" \
+  test "$rc" -eq 1 -a -n "$(grep -F "cannot open LCM on '$LCM_DEFAULT_URL'" "$W/err")"
+
+bad nudge-tasks "cannot open $W/none.txt|No such file" --goals "$W/none.txt"
+printf '0.1 0 0\n0.2 x 0\n' >"$W/g1.txt"
+bad nudge-tasks "$W/g1.txt:2|y: 'x' is not a finite number" --goals "$W/g1.txt"
+printf '# only a comment\n\n' >"$W/g2.txt"
+bad nudge-tasks "$W/g2.txt: no goals in the file" --goals "$W/g2.txt"
+printf '0.1 0 nan\n' >"$W/g3.txt"
+bad nudge-tasks "$W/g3.txt:1|nan" --goals "$W/g3.txt"
+printf '0.1 0 0 0.01 5 7\n' >"$W/g4.txt"
+bad nudge-tasks "$W/g4.txt:1" --goals "$W/g4.txt"
+printf '0.1 0 45\n' >"$W/g5.txt"
+bad nudge-tasks "$W/g5.txt:1|yaw" --goals "$W/g5.txt"
+head -c 300 "$BIN/nudge-status" >"$W/g6.txt"
+bad nudge-tasks "$W/g6.txt:1" --goals "$W/g6.txt"
+rm -f "$W"/*.xml "$W"/g?.txt
+
+# --- 3. nudge-up ---------------------------------------------------------------------
+
+help nudge-up
+bad nudge-up "unknown argument: --bogus" --bogus
+bad nudge-up "unknown argument: stray" stray
+bad nudge-up "unknown option: --camera-arg|processes" --camera-arg x
+bad nudge-up "--bridge-arg needs a value" --bridge-arg
+bad nudge-up "--log-dir needs a value" --log-dir
+bad nudge-up "'demo' must come first" --grace 1 demo
+bad nudge-up "options after -- are for the task runner" run -- --goal 0.1,0,0
+bad nudge-up "--grace|'abc'" --grace abc
+bad nudge-up "--grace|'-1'" --grace -1
+bad nudge-up "--grace|'nan'" --grace nan
+bad nudge-up "--ready-timeout|'inf'" --ready-timeout inf
+bad nudge-up "--ready-timeout must be positive" --ready-timeout 0
+bad nudge-up "--theta|'nan,1,1,1'" --theta nan,1,1,1
+bad nudge-up "--theta|'1,2,3'" --theta 1,2,3
+bad nudge-up "--theta|'1,2,3,4;touch x'" --theta '1,2,3,4;touch x'
+bad nudge-up "--theta|'1,2,3,4 5'" --theta '1,2,3,4 5'
+bad nudge-up "--workspace|'1,2,3'|XLO,YLO,XHI,YHI" --workspace 1,2,3
+bad nudge-up "--workspace|'1,2,3,4;touch x'" --workspace '1,2,3,4;touch x'
+bad nudge-up "--workspace needs a value" --workspace
+
+# Stand-ins for the programs: each records its argv (NUL-separated), its pid and its umask,
+# then runs until SIGINT/SIGTERM; nudge-tasks exits at once; nudge-status --wait says
+# "heartbeat seen" once the process has lived 0.3 s (so one that exits at start is seen
+# exiting); the program named by $FAKE_REFUSE says what a real one says on a bad value
+# and exits 2.
+FAKE=$W/fake-bin
+mkdir "$FAKE"
+cat >"$FAKE/fake" <<'EOF'
+#!/usr/bin/env bash
+# Started in the background, a script inherits SIGINT ignored and could not trap it; the C
+# programs set their handlers with sigaction, which overrides that. Do the same here.
+[[ -n ${FAKE_SIGINT:-} ]] || FAKE_SIGINT=1 exec env --default-signal=INT "$0" "$@"
+name=${0##*/}
+printf '%s\0' "$@" >"$FAKE_OUT/$name.args"
+umask >"$FAKE_OUT/$name.umask"
+echo "$$ $name" >>"$FAKE_OUT/fake.pids"
+case $name in
+  nudge-tasks) exit 0 ;;
+  nudge-status)
+    while (($#)); do [[ $1 == --pid ]] && pid=$2; shift; done
+    sleep 0.3
+    kill -0 "${pid:?}" 2>/dev/null
+    exit ;;
+esac
+if [[ $name == "${FAKE_REFUSE:-}" ]]; then
+  echo "$name: --threads: 'abc' is not an integer" >&2
+  exit 2
+fi
+trap 'exit 0' INT TERM
+while :; do sleep 0.05; done
+EOF
+chmod 755 "$FAKE/fake"
+for p in bridge executor planner adapter tasks status; do ln -s fake "$FAKE/nudge-$p"; done
+cp "$BIN/nudge-up" "$FAKE/nudge-up"
+export FAKE_OUT=$W
+
+# args_are NAME ARG...: the stand-in NAME was called with exactly these arguments.
+args_are() {
+  local name=$1 got=() want
+  shift
+  mapfile -d '' -t got <"$W/$name.args" 2>/dev/null
+  want=("$@")
+  local g w
+  printf -v g '%q ' "${got[@]}"
+  printf -v w '%q ' "${want[@]}"
+  if [[ $g == "$w" ]]; then pt_ok "$name got its arguments literally: ${w% }"
+  else pt_fail "$name got: ${g% }; want: ${w% }"; fi
+}
+
+# Every hostile character sequence a value can carry. None of them may be run.
+EVIL=("0.5;touch $W/pwned1" 'a b  c' "\$(touch $W/pwned2)" "\`touch $W/pwned3\`" '*' ''
+      "x' ; touch $W/pwned4 ; '" "\"; touch $W/pwned5; \"" $'line1\nline2' '--help')
+LOGDIR="$W/logs with space;\$(touch $W/pwned6)"
+BUF="$W/buf dir/replay \`x\`.nrb"
+mkdir -p "$W/buf dir"
+THETA=0.3,0.005,1e-4,1
+WS=-0.4,-0.3,0.4,0.3
+
+( umask 000
+  exec "$FAKE/nudge-up" demo --lcm-url memq:// --log-dir "$LOGDIR" --buffer "$BUF" \
+    --theta "$THETA" --workspace "$WS" --grace 2 --ready-timeout 5 \
+    --bridge-arg "${EVIL[0]}" --bridge-arg "${EVIL[1]}" \
+    --planner-arg --pop --planner-arg "${EVIL[2]}" \
+    --executor-arg "${EVIL[3]}" --executor-arg "${EVIL[4]}" --executor-arg "${EVIL[5]}" \
+    --adapter-arg "${EVIL[6]}" --adapter-arg "${EVIL[7]}" \
+    -- --goal "${EVIL[8]}" "${EVIL[9]}" "${EVIL[4]}" ) >"$W/up.out" 2>"$W/up.err" &
+STARTED+=($!)
+if pt_wait_pid "${STARTED[-1]}" 30; then
+  pt_check "nudge-up demo with stand-ins exits 0 (got $PT_RC)" test "$PT_RC" -eq 0
+else
+  pt_fail "nudge-up demo with stand-ins did not finish within 30 s"
+fi
+[[ $PT_RC == 0 ]] || cat "$W/up.err"
+# --workspace reaches the three processes that keep to the box, ahead of the user's own
+# --X-arg (a later --workspace there wins).
+args_are nudge-bridge --workspace "$WS" "${EVIL[0]}" "${EVIL[1]}"
+args_are nudge-executor --workspace "$WS" "${EVIL[3]}" "${EVIL[4]}" "${EVIL[5]}"
+args_are nudge-planner --workspace "$WS" --theta "$THETA" --pop "${EVIL[2]}"
+args_are nudge-adapter --theta "$THETA" --buffer "$BUF" "${EVIL[6]}" "${EVIL[7]}"
+args_are nudge-tasks --record "$BUF" --theta "$THETA" --goal "${EVIL[8]}" "${EVIL[9]}" "${EVIL[4]}"
+pwned=$(find "$W" -name 'pwned[0-9]')
+pt_check "no argument was run as a command (no pwned* file)" test -z "$pwned"
+pt_check "the log directory has its literal name" test -f "$LOGDIR/supervisor.log"
+# umask 000 outside: what nudge-up created, and what its processes inherit, is not
+# world-writable.
+ww=$(find "$LOGDIR" -perm -o+w -printf '%m %p\n')
+pt_check "under umask 000 nothing nudge-up created is world-writable (${ww:-none})" test -z "$ww"
+n=$(find "$LOGDIR" | wc -l)
+pt_figure cli_up_files_checked "$n" count
+for p in bridge executor planner adapter tasks; do
+  u=$(<"$W/nudge-$p.umask")
+  pt_check "nudge-$p runs with umask $u (o+w masked)" test $((8#$u & 2)) -eq 2
+done
+
+# A process refusing its arguments: nudge-up stops what it started and exits 2, showing
+# the refusal.
+rm -f "$W"/*.args "$W/fake.pids"
+FAKE_REFUSE=nudge-planner "$FAKE/nudge-up" run --lcm-url memq:// --log-dir "$W/logs2" \
+  --planner-arg --threads --planner-arg abc --grace 2 >"$W/up2.out" 2>"$W/up2.err" &
+STARTED+=($!)
+if pt_wait_pid "${STARTED[-1]}" 30; then
+  pt_check "nudge-up exits 2 when nudge-planner refuses its arguments (got $PT_RC)" test "$PT_RC" -eq 2
+else
+  pt_fail "nudge-up run did not give up within 30 s on a refused argument"
+fi
+pt_check "nudge-up names the process that refused" grep -q 'nudge-planner refused its arguments' "$W/up2.err"
+pt_check "nudge-up shows the refusal" grep -q "nudge-planner: --threads: 'abc' is not an integer" "$W/up2.err"
+pt_check "the planner ran once, the adapter never" \
+  test "$(grep -c ' nudge-planner$' "$W/fake.pids")" -eq 1 -a "$(grep -c ' nudge-adapter$' "$W/fake.pids")" -eq 0
+left=""
+while read -r p _; do kill -0 "$p" 2>/dev/null && left+=" $p"; done <"$W/fake.pids"
+pt_check "nothing nudge-up started is left running (${left:-none})" test -z "$left"
+grep -qE 'restarted|restart #' "$W/up2.err" && pt_fail "nudge-up tried to restart: $(grep restart "$W/up2.err")"
+
+# --- 4. nudge-spy ------------------------------------------------------------------------
+
+help nudge-spy
+bad nudge-spy "--lcm-url needs a value" --lcm-url
+mkdir "$W/java-bin"
+cat >"$W/java-bin/java" <<'EOF'
+#!/usr/bin/env bash
+printf '%s\0' "$@" >"$FAKE_OUT/java.args"
+EOF
+chmod 755 "$W/java-bin/java"
+: >"$W/t.jar"
+SPY_URL="udpm://239.255.76.67:7667?ttl=0;touch $W/pwned7"
+PATH="$W/java-bin:$PATH" NUDGE_LCMTYPES_JAR=$W/t.jar LCM_JAR=$W/t.jar JCHART2D_JAR=$W/t.jar \
+  DISPLAY= WAYLAND_DISPLAY= "$BIN/nudge-spy" --lcm-url "$SPY_URL" "${EVIL[1]}" "${EVIL[2]}" \
+  >"$W/spy.out" 2>"$W/spy.err"
+pt_check "nudge-spy ran java (status $?)" test -f "$W/java.args"
+mapfile -d '' -t jargs <"$W/java.args"
+tail3=("${jargs[@]: -3}")
+pt_check "nudge-spy passed its arguments to lcm-spy literally" \
+  test "${tail3[0]}" = "--lcm-url=$SPY_URL" -a "${tail3[1]}" = "${EVIL[1]}" -a "${tail3[2]}" = "${EVIL[2]}"
+pt_check "nudge-spy ran nothing else (no pwned* file)" test -z "$(find "$W" -name 'pwned[0-9]')"
+
+pt_figure cli_cases "$NCASES" count
+if ((PT_FAILS)); then
+  pt_say "FAILED ($PT_FAILS failed checks)"
+  exit 1
+fi
+pt_say "PASSED"

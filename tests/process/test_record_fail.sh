@@ -1,0 +1,184 @@
+#!/usr/bin/env bash
+# test_record_fail: nudge-tasks recording into a replay buffer that stops taking appends.
+#
+#   netns-run bash test_record_fail.sh BUILD_DIR
+#
+# The system runs (`nudge-up run`) and nudge-tasks pushes with --record into buffers on
+# file systems mounted in the test's private mount namespace (netns-run makes one; the
+# test runs as root, so a mode of 0444 would not stop a write: the kernel has to refuse).
+# Goals follow the default chain with eps 2.5e-3, tau 2 s, so every task is a real push.
+#
+# 0. seed: one task recorded into a buffer on a 1 MiB tmpfs, so the file holds a record
+#    written by the real recorder before trouble starts;
+# 1. disk full: a dummy file fills the tmpfs; two tasks;
+# 2. read-only: a copy of the seeded buffer behind a read-only bind mount; two tasks;
+# 3. read-only, then writable again: the mount turns read-write after the first task's
+#    failure; the second task's append reopens the file and is recorded.
+# In 1 and 2 nudge-tasks runs both goals to their end (both task lines and its summary),
+# says for every task it could not record which file and why (ENOSPC / EROFS, by name
+# and text), exits 3 and reports the failures as tasks_record_failed; the seeded records
+# are all readable and the file is byte for byte what it was. A task whose recording is
+# refused for its data (messages lost on a loaded machine) is not an append failure, so
+# 1 and 2 demand at least one failed append and every task either failed to append or
+# was refused for its data; none recorded. 3 demands exactly one of each.
+set -u
+PT_NAME=test_record_fail
+. "$(dirname "${BASH_SOURCE[0]}")/../tools/process-lib.sh"
+pt_init "$@"
+
+UP=$PT_WORK/up
+FULL=$PT_WORK/full          # tmpfs, 1 MiB
+RW=$PT_WORK/rw              # plain directory ...
+RO=$PT_WORK/ro              # ... bind-mounted here read-only
+mkdir -p "$FULL" "$RW" "$RO"
+if ! why=$(mount -t tmpfs -o size=1m,mode=0700 nudge-full "$FULL" 2>&1); then
+  echo "$PT_NAME: SKIP: cannot mount a tmpfs here: $why" >&2
+  exit 77
+fi
+unmount_all() {
+  umount -l "$FULL" 2>/dev/null
+  umount -l "$RO" 2>/dev/null
+  return 0
+}
+pt_on_cleanup unmount_all
+TASK_ARGS=(--eps 2.5e-3 --tau 2 --settle 0.5)
+
+# tasks NAME BUFFER GOAL...: run nudge-tasks recording into BUFFER in the background
+# (pid in TASKS_PID), output in $PT_WORK/NAME.out / .err.
+tasks() {
+  local name=$1 buf=$2
+  shift 2
+  local g goals=()
+  for g in "$@"; do goals+=(--goal "$g"); done
+  pt_spawn TASKS_PID "$PT_BIN/nudge-tasks" --record "$buf" "${TASK_ARGS[@]}" "${goals[@]}" \
+    >"$PT_WORK/$name.out" 2>"$PT_WORK/$name.err"
+}
+
+# finish NAME: wait for the runner started by tasks; its status in PT_RC.
+finish() {
+  if ! pt_wait_pid "$TASKS_PID" 40; then
+    pt_fail "$1: nudge-tasks did not finish within 40 s"
+    kill -INT "$TASKS_PID"
+    pt_wait_pid "$TASKS_PID" 5 || kill -KILL "$TASKS_PID"
+    PT_RC=124
+  fi
+}
+
+# figure NAME FILE: value of summary line NAME in FILE ("" if absent).
+figure() { awk -v n="$1" '$1 == n { print $2 }' "$2"; }
+
+# records FILE: the buffer's record count via nudge-logcheck buffer ("" if unreadable).
+records() { "$PT_LC" buffer "$1" 2>/dev/null | awk '$1 == "records_in_file" { print $2 }'; }
+
+# check_failed_run NAME BUFFER REASON ENAME: the assertions of cases 1 and 2.
+check_failed_run() {
+  local name=$1 buf=$2 reason=$3 ename=$4 out=$PT_WORK/$1.out err=$PT_WORK/$1.err
+  local failed recorded run appends appends_ok others
+  cat "$out"
+  grep -E 'not recorded|cannot record' "$err"
+  pt_check "$name: nudge-tasks exits 3, appends failed (got $PT_RC)" test "$PT_RC" -eq 3
+  pt_check "$name: both goals were attempted to their end" \
+    grep -qE '^task 2/2 goal .*: (reached in|timed out after)' "$out"
+  pt_check "$name: the summary line 'reached K/2 goals' came" grep -qE '^reached [0-9]/2 goals$' "$out"
+  run=$(figure tasks_run "$out")
+  failed=$(figure tasks_record_failed "$out")
+  recorded=$(figure tasks_recorded "$out")
+  pt_check "$name: tasks_run 2 (got ${run:-none})" test "${run:-0}" -eq 2
+  pt_check "$name: tasks_recorded 0 (got ${recorded:-none})" test "${recorded:-x}" = 0
+  # Each failed append is one line naming the file, the errno text and its name.
+  appends=$(grep -E '^nudge-tasks: task [0-9]+ not recorded: ' "$err" | grep -cF "not recorded: $buf: ")
+  appends_ok=$(grep -E '^nudge-tasks: task [0-9]+ not recorded: ' "$err" | grep -F "not recorded: $buf: " |
+    grep -F "$reason" | grep -cF "[$ename]")
+  others=$(grep -cE '^nudge-tasks: task [0-9]+ not recorded: ' "$err")
+  pt_check "$name: at least one append failed and the summary counts them (tasks_record_failed ${failed:-none}, $appends error lines)" \
+    test "${failed:-0}" -ge 1 -a "${failed:-0}" -eq "$appends"
+  pt_check "$name: every failed append names $buf, '$reason' and [$ename] ($appends_ok of $appends)" \
+    test "$appends_ok" -eq "$appends"
+  pt_check "$name: every task is either a failed append or refused for its data ($others not-recorded lines)" \
+    test "$others" -eq 2
+  pt_check "$name: the final line counts the lost tasks and names the file" \
+    grep -qE "^nudge-tasks: $failed task\(s\) not recorded: appending to $buf failed; the last error: .*\[$ename\]" "$err"
+  pt_figure "${name}_record_failed" "${failed:-0}" count
+}
+
+# --- the system ----------------------------------------------------------------------
+pt_spawn up "$PT_BIN/nudge-up" run --log-dir "$UP" 2>"$PT_WORK/up.err"
+pt_up_wait "$UP" 30 "$up" || { pt_fail "nudge-up run did not come up within 30 s"; exit 1; }
+pt_ok "nudge-up run: all processes up"
+
+# --- 0. seed ---------------------------------------------------------------------------
+BUF=$FULL/replay.nrb
+t0=$(pt_now_us)
+tasks seed "$BUF" 0.15,0,0
+finish seed
+cat "$PT_WORK/seed.out"
+pt_check "seed: nudge-tasks exits 0 (got $PT_RC)" test "$PT_RC" -eq 0
+n_seed=$(records "$BUF")
+pt_check "seed: one record in the buffer on the tmpfs (got ${n_seed:-unreadable})" test "${n_seed:-0}" -eq 1
+pt_figure seed_duration $((($(pt_now_us) - t0) / 1000)) ms
+((n_seed == 1)) || exit 1   # the rest compares against it
+
+# --- 1. disk full ----------------------------------------------------------------------
+dd if=/dev/zero of="$FULL/filler" bs=4k status=none 2>/dev/null
+pt_check "the tmpfs is full (0 blocks free)" test "$(stat -f -c %a "$FULL")" -eq 0
+size_before=$(stat -c %s "$BUF")
+sum_before=$(sha256sum <"$BUF")
+t0=$(pt_now_us)
+tasks full "$BUF" 0.25,0.10,0.4 0.25,0.25,0.8
+finish full
+pt_figure full_duration $((($(pt_now_us) - t0) / 1000)) ms
+check_failed_run full "$BUF" "No space left on device" ENOSPC
+pt_check "full: the seeded record is still there and readable ($(records "$BUF") records)" \
+  test "$(records "$BUF")" = 1
+pt_check "full: the buffer is byte for byte unchanged ($size_before bytes)" \
+  test "$(sha256sum <"$BUF")" = "$sum_before"
+pt_check "full: the failed appends were cut back: no stray temp or partial file left" \
+  test "$(ls "$FULL")" = "$(printf 'filler\nreplay.nrb')"
+
+# --- 2. read-only ----------------------------------------------------------------------
+cp "$BUF" "$RW/replay.nrb"
+rm -f "$FULL/filler"
+if ! why=$({ mount --bind "$RW" "$RO" && mount -o remount,bind,ro "$RO"; } 2>&1); then
+  pt_fail "cannot make a read-only bind mount: $why"
+  exit 1
+fi
+ROBUF=$RO/replay.nrb
+pt_check "read-only: a write into the mount is refused by the kernel" \
+  bash -c "! : 2>/dev/null >>'$ROBUF'"
+sum_before=$(sha256sum <"$ROBUF")
+t0=$(pt_now_us)
+tasks ro "$ROBUF" 0.10,0.30,0.8 0.00,0.20,0.3
+finish ro
+pt_figure ro_duration $((($(pt_now_us) - t0) / 1000)) ms
+check_failed_run ro "$ROBUF" "Read-only file system" EROFS
+pt_check "read-only: the start said it cannot record there now, and went on" \
+  grep -qF "cannot record into $ROBUF now: $ROBUF: cannot open for appending: Read-only file system [EROFS]; running the tasks anyway" "$PT_WORK/ro.err"
+pt_check "read-only: the seeded record is still there and readable" test "$(records "$ROBUF")" = 1
+pt_check "read-only: the buffer is byte for byte unchanged" test "$(sha256sum <"$ROBUF")" = "$sum_before"
+
+# --- 3. read-only, then writable again ---------------------------------------------------
+size_before=$(stat -c %s "$ROBUF")
+tasks back "$ROBUF" 0.15,0.05,0 0.25,0.10,0.4
+if pt_wait_for 30 grep -qE '^nudge-tasks: task [0-9]+ not recorded: ' "$PT_WORK/back.err"; then
+  mount -o remount,bind,rw "$RO" || pt_fail "cannot remount $RO read-write"
+else
+  pt_fail "back: no failed append reported within 30 s"
+fi
+finish back
+cat "$PT_WORK/back.out"
+grep -E 'not recorded|writable again|recorded:' "$PT_WORK/back.err"
+pt_check "back: nudge-tasks exits 3, one append failed (got $PT_RC)" test "$PT_RC" -eq 3
+pt_check "back: tasks_record_failed 1, tasks_recorded 1" \
+  test "$(figure tasks_record_failed "$PT_WORK/back.out") $(figure tasks_recorded "$PT_WORK/back.out")" = "1 1"
+pt_check "back: the runner reopened the buffer once it was writable" \
+  grep -qF "$ROBUF is writable again: recording into it (1 rollouts there)" "$PT_WORK/back.err"
+pt_check "back: the buffer holds the seeded record and the new one" test "$(records "$ROBUF")" = 2
+pt_check "back: the seeded record's bytes are unchanged" \
+  cmp -s -n "$size_before" "$BUF" "$ROBUF"
+
+# --- the system is unharmed --------------------------------------------------------------
+pt_up_stop "$up" 30
+pt_check "nudge-up run exits 0 after SIGINT (got $PT_RC)" test "$PT_RC" -eq 0
+pt_restarts_are "$UP"
+pt_none_left "$UP"
+exit $((PT_FAILS > 0))

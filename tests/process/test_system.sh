@@ -1,0 +1,73 @@
+#!/usr/bin/env bash
+# test_system: the whole process system on two goals in real time, then a clean stop.
+#
+#   netns-run bash test_system.sh BUILD_DIR
+#
+# 1. `nudge-up demo` on the default chain's first two goals (tau 5 s) with lcm-logger
+#    recording: the task runner exits 0, both tasks ran and at least one reached its goal
+#    (EPISODE events in the log). The live system reaches ~4 of the chain's 5 and both of
+#    these on an idle machine; with the planner starved of CPU (plans slower than the
+#    executor's 0.1 s timeout, so the robot stops and goes) the first push can time out
+#    while the second still succeeds, so one of two is what the test demands. And the
+#    setpoint stream EE_CMD is continuous in p, v, a, across plan switches too (each step
+#    within what v_max, a_max, j_max allow in its dt). Its largest gap is printed
+#    (ee_cmd_gap_max; the 20 ms target is a measured figure) but only asserted below
+#    500 ms, i.e. the loop is alive: a shared 2-core VM stalls a SCHED_FIFO thread for
+#    tens of ms now and then (71 ms seen in CI), and timed assertions flake there;
+#    nothing of the run is left afterwards.
+# 2. `nudge-up run`, SIGINT after a few seconds: exit 0, every process it logged is gone.
+set -u
+PT_NAME=test_system
+. "$(dirname "${BASH_SOURCE[0]}")/../tools/process-lib.sh"
+pt_init "$@"
+
+LOG=$PT_WORK/system.lcmlog
+DEMO=$PT_WORK/demo
+RUN=$PT_WORK/run
+GOALS=(--goal 0.15,0,0 --goal 0.25,0.10,0.4)   # the default chain's first two
+
+# --- 1. demo on two goals --------------------------------------------------------------
+pt_logger "$LOG"
+t_start=$(pt_now_us)
+pt_spawn demo "$PT_BIN/nudge-up" demo --log-dir "$DEMO" -- --tau "$(pt_slow 5)" "${GOALS[@]}" \
+  >"$PT_WORK/demo.out" 2>"$PT_WORK/demo.err"
+# Start-up ~1 s, two tasks of at most 5 s, settling, stopping: well under 60 s.
+if pt_wait_pid "$demo" 90; then
+  pt_check "nudge-up demo exits 0 (the task runner's status; got $PT_RC)" test "$PT_RC" -eq 0
+else
+  pt_fail "nudge-up demo did not finish within $((90 * PT_SLOW)) s"
+fi
+pt_figure demo_duration $((($(pt_now_us) - t_start) / 1000)) ms
+pt_stop_logger
+cat "$PT_WORK/demo.out"
+
+pt_check "the task runner printed its summary" grep -q '^reached [0-9]*/2 goals' "$PT_WORK/demo.out"
+pt_check "EPISODE: both tasks started and ended, at least one reached its goal" \
+  pt_lc episodes "$LOG" --min-start 2 --min-end 2 --min-success 1
+pt_check "EE_CMD: loop alive (no gap over 0.5 s), steps within v_max dt, a_max dt, j_max dt (also at plan switches)" \
+  pt_lc ee-cmd "$LOG" --max-gap-ms 500
+pt_val switches ee-cmd "$LOG" plan_switches
+pt_check "the continuity check saw plan switches (${switches:-0})" test "${switches:-0}" -ge 5
+pt_val rate ee-cmd "$LOG" ee_cmd_rate
+pt_check "EE_CMD at ~1 kHz (${rate:-0} Hz)" awk -v r="${rate:-0}" 'BEGIN { exit !(r > 900 && r < 1100) }'
+pt_restarts_are "$DEMO"
+pt_none_left "$DEMO"
+
+# --- 2. nudge-up run, stopped by SIGINT ------------------------------------------------
+pt_spawn up "$PT_BIN/nudge-up" run --log-dir "$RUN" 2>"$PT_WORK/run.err"
+if pt_up_wait "$RUN" 30 "$up"; then
+  pt_ok "nudge-up run: all processes up"
+  sleep 3
+  pids=$(pt_logged_pids "$RUN" | tr '\n' ' ')
+  pt_figure run_processes "$(echo $pids | wc -w)" count
+  t_int=$(pt_now_us)
+  pt_up_stop "$up" 30
+  pt_figure stop_time $((($(pt_now_us) - t_int) / 1000)) ms
+  pt_check "nudge-up run exits 0 after SIGINT (got $PT_RC)" test "$PT_RC" -eq 0
+  pt_restarts_are "$RUN"
+  pt_check_not "no process needed SIGKILL" grep -q SIGKILL "$RUN/supervisor.log"
+  pt_none_left "$RUN"
+else
+  pt_fail "nudge-up run did not come up within $((30 * PT_SLOW)) s (see supervisor.log below)"
+fi
+exit $((PT_FAILS > 0))

@@ -1,0 +1,105 @@
+/* test_cost: plan cost terms, their symmetry, and the terminal condition's edges. */
+#include "nd_test.h"
+
+#include "nd_cost.h"
+
+static void test_known_values(void **state) {
+  (void)state;
+  const nd_goal g = {.x = 0.5, .y = -0.2, .yaw = 0.3};
+  const double obj[2] = {0.8, 0.2}, ee[2] = {0.8, 0.25};
+  assert_near(nd_cost_pos(obj, &g), 0.09 + 0.16, 1e-15);
+  assert_near(nd_cost_prox(obj, ee), 0.0025, 1e-15);
+  assert_near(nd_cost_rot(0.3, &g), 0.0, 0.0);
+  assert_near(nd_cost_rot(0.3 + 3.14159265358979323846 / 2.0, &g), 1.0, 1e-15);
+  assert_near(nd_cost_rot(0.3 + 3.14159265358979323846 / 6.0, &g), 0.25, 1e-15);
+
+  const nd_cost_weights w = {.w_rot = 0.1, .w_prox = 0.01, .w_acc = 0.001};
+  const double yaw = 0.3 + 3.14159265358979323846 / 6.0;
+  assert_near(nd_task_error(&w, &g, obj, yaw), 0.25 + 0.1 * 0.25, 1e-15);
+  assert_near(nd_cost_plan(&w, &g, obj, yaw, ee, 40.0),
+              0.25 + 0.1 * 0.25 + 0.01 * 0.0025 + 0.001 * 40.0, 1e-15);
+  /* Each weight scales only its own term. */
+  nd_cost_weights w2 = w;
+  w2.w_acc = 0.0;
+  assert_near(nd_cost_plan(&w, &g, obj, yaw, ee, 40.0) - nd_cost_plan(&w2, &g, obj, yaw, ee, 40.0),
+              0.04, 1e-15);
+  w2 = w;
+  w2.w_prox = 0.0;
+  assert_near(nd_cost_plan(&w, &g, obj, yaw, ee, 40.0) - nd_cost_plan(&w2, &g, obj, yaw, ee, 40.0),
+              0.01 * 0.0025, 1e-15);
+}
+
+static void test_cuboid_symmetry(void **state) {
+  (void)state;
+  const double pi = 3.14159265358979323846;
+  const double obj[2] = {0.1, 0.1};
+  const nd_cost_weights w = nd_cost_weights_default();
+  for (int gi = -6; gi <= 6; gi++) {
+    const nd_goal g = {.x = 0.0, .y = 0.0, .yaw = gi * 0.5};
+    for (int i = -20; i <= 20; i++) {
+      const double yaw = i * 0.17;
+      const double r = nd_cost_rot(yaw, &g);
+      assert_true(r >= 0.0 && r <= 1.0);
+      assert_near(nd_cost_rot(yaw + pi, &g), r, 1e-12);
+      assert_near(nd_cost_rot(yaw - pi, &g), r, 1e-12);
+      /* Mirror images about the goal yaw cost the same; so do whole turns. */
+      assert_near(nd_cost_rot(2.0 * g.yaw - yaw, &g), r, 1e-12);
+      assert_near(nd_cost_rot(yaw + 2.0 * pi, &g), r, 1e-12);
+      assert_near(nd_task_error(&w, &g, obj, yaw + pi), nd_task_error(&w, &g, obj, yaw), 1e-12);
+    }
+    /* Zero at the goal and at its flip, maximal a quarter turn away. */
+    assert_near(nd_cost_rot(g.yaw + pi, &g), 0.0, 1e-24);
+    assert_near(nd_cost_rot(g.yaw + pi / 2.0, &g), 1.0, 1e-15);
+  }
+}
+
+static void test_default_weights(void **state) {
+  (void)state;
+  const nd_cost_weights w = nd_cost_weights_default();
+  assert_near(w.w_rot, 2e-2, 0.0);
+  /* Proximity and acceleration must stay tie-breakers: a 10 cm position error
+   * (L_pos = 1e-2) must outweigh a 30 cm EE distance and a mean |a|^2 of 130 together. */
+  assert_true(w.w_prox > 0.0 && w.w_acc > 0.0);
+  assert_true(w.w_prox * 0.09 + w.w_acc * 130.0 < 1e-2);
+  /* ...yet a quarter-turn yaw error alone fails the task at eps = 1e-2. */
+  assert_true(w.w_rot * 1.0 > 1e-2);
+}
+
+static void test_terminal_condition(void **state) {
+  (void)state;
+  const double eps = 1e-2, tau = 5.0;
+  assert_int_equal(nd_task_check(0.5, 1.0, eps, tau), ND_TASK_RUNNING);
+  assert_int_equal(nd_task_check(0.005, 1.0, eps, tau), ND_TASK_SUCCESS);
+  /* Strict inequalities on both edges. */
+  assert_int_equal(nd_task_check(eps, 1.0, eps, tau), ND_TASK_RUNNING);
+  assert_int_equal(nd_task_check(nextafter(eps, 0.0), 1.0, eps, tau), ND_TASK_SUCCESS);
+  assert_int_equal(nd_task_check(0.5, tau, eps, tau), ND_TASK_RUNNING);
+  assert_int_equal(nd_task_check(0.5, nextafter(tau, 10.0), eps, tau), ND_TASK_TIMEOUT);
+  /* Success wins over timeout. */
+  assert_int_equal(nd_task_check(0.001, 7.0, eps, tau), ND_TASK_SUCCESS);
+  /* A non-finite error never succeeds, whatever eps is. */
+  assert_int_equal(nd_task_check(NAN, 1.0, eps, tau), ND_TASK_RUNNING);
+  assert_int_equal(nd_task_check(NAN, 7.0, eps, tau), ND_TASK_TIMEOUT);
+  assert_int_equal(nd_task_check(-INFINITY, 1.0, eps, tau), ND_TASK_RUNNING);
+  assert_int_equal(nd_task_check(NAN, 1.0, INFINITY, tau), ND_TASK_RUNNING);
+  assert_int_equal(nd_task_check(INFINITY, 1.0, INFINITY, tau), ND_TASK_RUNNING);
+  /* A NaN pose propagates into the task error, which must then not count as success. */
+  const nd_cost_weights w = nd_cost_weights_default();
+  const nd_goal g = {.x = 0.0, .y = 0.0, .yaw = 0.0};
+  const double obj[2] = {NAN, 0.0};
+  assert_int_equal(nd_task_check(nd_task_error(&w, &g, obj, 0.0), 1.0, eps, tau),
+                   ND_TASK_RUNNING);
+  assert_int_equal(nd_task_check(nd_task_error(&w, &g, (const double[2]){0, 0}, NAN), 1.0,
+                                 eps, tau),
+                   ND_TASK_RUNNING);
+}
+
+int main(void) {
+  const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_known_values),
+      cmocka_unit_test(test_cuboid_symmetry),
+      cmocka_unit_test(test_default_weights),
+      cmocka_unit_test(test_terminal_condition),
+  };
+  return cmocka_run_group_tests(tests, NULL, NULL);
+}

@@ -1,0 +1,328 @@
+/* test_rollout: single and batched rollouts: tracking, contact physics under theta,
+ * determinism across workers and histories, divergence handling. */
+#include <stdlib.h>
+#include <string.h>
+
+#include "nd_snap.h"
+#include "nd_test.h"
+#include "nds_test.h"
+#include "nds_rollout.h"
+
+/* Setpoint state at rest at (x, y). */
+static void sp_at(double x, double y, double sp[2][4]) {
+  memset(sp, 0, 8 * sizeof(double));
+  sp[0][ND_P] = x;
+  sp[1][ND_P] = y;
+}
+
+/* The sphere away from the box: a two-keypoint move ending at rest. */
+static const double free_keys[8] = {-0.2, 0.25, 0.3, 0.1, -0.1, 0.2, 0, 0};
+
+static void free_start(const nds_model *nm, nds_state *s, double sp[2][4]) {
+  const double ee[2] = {-0.3, 0.2};
+  nds_state_rest(nm, 0, 0, 0, ee, s);
+  sp_at(ee[0], ee[1], sp);
+}
+
+/* The rollout follows the chained segments: ends at the last keypoint, reports the
+ * setpoint's acceleration and peaks as an independent evaluation of the chain gives
+ * them, and runs round(M T / dt) steps. */
+static void test_tracks_keypoints(void **state) {
+  (void)state;
+  const double dts[4] = {0.001, 0.002, 0.005, 0.01};
+  for (int i = 0; i < 4; i++) {
+    nds_model nm;
+    nds_test_build(&nm, dts[i], NULL);
+    mjData *d = mj_makeData(nm.m);
+    nds_ctrl_cfg ctrl;
+    nds_ctrl_cfg_default(&ctrl);
+    nds_state s0;
+    double sp0[2][4];
+    free_start(&nm, &s0, sp0);
+    nds_rollout_out o;
+    nds_rollout(&nm, d, &ctrl, &s0, (const double(*)[4])sp0, free_keys, 2, 0.3, &o);
+    assert_int_equal(o.diverged, 0);
+    printf("ee_final_error_%gms %.2e m\n", dts[i] * 1e3,
+           hypot(o.ee_xy[0] + 0.1, o.ee_xy[1] - 0.2));
+    assert_near(o.ee_xy[0], -0.1, 1e-3);
+    assert_near(o.ee_xy[1], 0.2, 1e-3);
+    assert_near(o.obj_xy[0], 0, 1e-4); /* untouched */
+    assert_near(o.obj_yaw, 0, 1e-4);
+
+    long n = lround(0.6 / dts[i]);
+    assert_near(d->time, n * dts[i], 1e-9);
+    nd_snap_seg seg[2];
+    double s[2][4];
+    memcpy(s, sp0, sizeof(s));
+    for (int k = 0; k < 2; k++) {
+      nd_snap_seg_make(&seg[k], (const double(*)[4])s, free_keys + 4 * k, free_keys + 4 * k + 2, 0.3);
+      nd_snap_seg_eval(&seg[k], 0.3, s);
+    }
+    double acc = 0, vpk = 0, apk = 0;
+    for (long j = 0; j < n; j++) {
+      double t = j * dts[i];
+      int k = t < 0.3 ? 0 : 1;
+      nd_snap_seg_eval(&seg[k], t - 0.3 * k, s);
+      double a = hypot(s[0][ND_A], s[1][ND_A]), v = hypot(s[0][ND_V], s[1][ND_V]);
+      acc += a * a;
+      vpk = fmax(vpk, v);
+      apk = fmax(apk, a);
+    }
+    assert_near(o.acc_sq_mean, acc / n, 1e-9 * acc / n);
+    assert_near(o.v_peak, vpk, 1e-12);
+    assert_near(o.a_peak, apk, 1e-12);
+    mj_deleteData(d);
+    nds_model_free(&nm);
+  }
+
+  /* A duration that is not a whole number of steps rounds to the nearest. */
+  nds_model nm;
+  nds_test_build(&nm, 0.007, NULL);
+  mjData *d = mj_makeData(nm.m);
+  nds_ctrl_cfg ctrl;
+  nds_ctrl_cfg_default(&ctrl);
+  nds_state s0;
+  double sp0[2][4];
+  free_start(&nm, &s0, sp0);
+  nds_rollout_out o;
+  nds_rollout(&nm, d, &ctrl, &s0, (const double(*)[4])sp0, free_keys, 2, 0.3, &o);
+  assert_int_equal(o.diverged, 0);
+  assert_near(d->time, 86 * 0.007, 1e-12); /* round(0.6 / 0.007) = 86 */
+  mj_deleteData(d);
+  nds_model_free(&nm);
+}
+
+/* The lightest supported sphere at the coarsest supported step still tracks. */
+static void test_light_sphere_coarse_step(void **state) {
+  (void)state;
+  const double th[ND_NTHETA] = {1, 0.005, 1e-4, 0.2};
+  nds_model nm;
+  nds_test_build(&nm, 0.01, th);
+  mjData *d = mj_makeData(nm.m);
+  nds_ctrl_cfg ctrl;
+  nds_ctrl_cfg_default(&ctrl);
+  nds_state s0;
+  double sp0[2][4];
+  free_start(&nm, &s0, sp0);
+  nds_rollout_out o;
+  nds_rollout(&nm, d, &ctrl, &s0, (const double(*)[4])sp0, free_keys, 2, 0.3, &o);
+  assert_int_equal(o.diverged, 0);
+  assert_near(o.ee_xy[0], -0.1, 2e-3);
+  assert_near(o.ee_xy[1], 0.2, 2e-3);
+  mj_deleteData(d);
+  nds_model_free(&nm);
+}
+
+/* Theta reaches the contact: the sphere strikes the box and stops, the box slides on;
+ * it slides less far under more sliding friction. */
+static double push_distance(double slide) {
+  const double th[ND_NTHETA] = {slide, 0.005, 1e-4, 1.0};
+  nds_model nm;
+  nds_test_build(&nm, 0.001, th);
+  mjData *d = mj_makeData(nm.m);
+  nds_ctrl_cfg ctrl;
+  nds_ctrl_cfg_default(&ctrl);
+  nds_state s0;
+  const double ee[2] = {-0.1, 0};
+  nds_state_rest(&nm, 0, 0, 0, ee, &s0);
+  double sp0[2][4];
+  sp_at(ee[0], ee[1], sp0);
+  const double keys[12] = {-0.03, 0, 0.8, 0, 0.0, 0, 0, 0, 0.0, 0, 0, 0};
+  nds_rollout_out o;
+  nds_rollout(&nm, d, &ctrl, &s0, (const double(*)[4])sp0, keys, 3, 0.2, &o);
+  assert_int_equal(o.diverged, 0);
+  assert_near(o.obj_xy[1], 0, 1e-3); /* straight push */
+  assert_near(o.obj_yaw, 0, 1e-2);
+  assert_near(o.ee_xy[0], 0, 5e-3); /* the integral still unwinds what the push wound up */
+  assert_true(fabs(d->qvel[0]) < 1e-3); /* the box has come to rest */
+  mj_deleteData(d);
+  nds_model_free(&nm);
+  return o.obj_xy[0];
+}
+
+static void test_friction_changes_push(void **state) {
+  (void)state;
+  double lo = push_distance(0.5), hi = push_distance(1.5);
+  printf("push_distance_mu0.5 %.4f m\npush_distance_mu1.5 %.4f m\n", lo, hi);
+  /* Both were pushed past where the sphere stopped (its front at x = 0.025, the box's
+   * back face starting at -0.05: 0.075 m of contact travel). */
+  assert_true(hi > 0.07);
+  assert_true(lo > hi + 0.02);
+}
+
+/* Rollouts from the same state and plan are bitwise identical on every worker, in a
+ * batch, and whatever ran on the mjData before. */
+static void test_deterministic(void **state) {
+  (void)state;
+  char err[256];
+  nd_pool *pool = nd_pool_create(2, err, sizeof(err));
+  assert_non_null(pool);
+  nds_model proto;
+  nds_test_build(&proto, 0.005, NULL);
+  nds_batch *b = nds_batch_create(&proto, pool, err, sizeof(err));
+  assert_non_null(b);
+  assert_ptr_equal(nds_batch_pool(b), pool);
+  nds_ctrl_cfg ctrl;
+  nds_ctrl_cfg_default(&ctrl);
+
+  /* A push with an offset on a box already sliding and turning, so the contact solver
+   * works on the cone's boundary, where its result depends on where it starts. */
+  nds_state s0;
+  const double ee[2] = {-0.1, 0.015};
+  nds_state_rest(&proto, 0, 0, 0.1, ee, &s0);
+  s0.obj_vel[0] = 0.15;
+  s0.obj_vel[1] = 0.05;
+  s0.obj_vel[5] = 0.5;
+  s0.obj_pos[2] -= 1e-4; /* sunk in as a synced box is, so the first step has contacts */
+  double sp0[2][4];
+  sp_at(ee[0], ee[1], sp0);
+  const double keys[8] = {-0.04, 0.02, 0.3, 0.0, 0.02, 0.0, 0.1, -0.1};
+
+  nds_rollout_out ref, o;
+  nds_rollout(nds_batch_model(b, 0), nds_batch_data(b, 0), &ctrl, &s0,
+              (const double(*)[4])sp0, keys, 2, 0.3, &ref);
+  assert_int_equal(ref.diverged, 0);
+  printf("offset_push_obj %.4f %.4f m yaw %.4f rad\n", ref.obj_xy[0], ref.obj_xy[1], ref.obj_yaw);
+  assert_true(ref.obj_xy[0] > 0.02);
+  assert_true(fabs(ref.obj_yaw - 0.1) > 0.01);
+  nds_rollout(nds_batch_model(b, 1), nds_batch_data(b, 1), &ctrl, &s0,
+              (const double(*)[4])sp0, keys, 2, 0.3, &o);
+  assert_memory_equal(&ref, &o, sizeof(o));
+
+  /* Dirty worker 0's mjData: a diverging rollout, a rollout that ends mid-push (the
+   * solver's warm start then comes from another contact state), stray inputs. */
+  mjData *d = nds_batch_data(b, 0);
+  const nds_model *nm = nds_batch_model(b, 0);
+  nds_ctrl_cfg wild = ctrl;
+  wild.kp = 1e9;
+  wild.f_max = INFINITY;
+  nds_rollout(nm, d, &wild, &s0, (const double(*)[4])sp0, keys, 2, 0.3, &o);
+  assert_int_equal(o.diverged, 1);
+  nds_state other = s0;
+  other.obj_vel[0] = 0.3;
+  other.obj_vel[5] = -1.0;
+  nds_rollout(nm, d, &ctrl, &other, (const double(*)[4])sp0, keys, 1, 0.3, &o);
+  assert_int_equal(o.diverged, 0);
+  /* A mild stray warm start: one the solver prefers to its own start, so it counts. */
+  for (int i = 0; i < nm->m->nv; i++) d->qacc_warmstart[i] = 0.3 * i;
+  for (int i = 0; i < nm->m->nv; i++) d->qfrc_applied[i] = 0.5;
+  for (int i = 0; i < 6 * nm->m->nbody; i++) d->xfrc_applied[i] = 0.1;
+  d->time = 42;
+  nds_rollout(nm, d, &ctrl, &s0, (const double(*)[4])sp0, keys, 2, 0.3, &o);
+  assert_memory_equal(&ref, &o, sizeof(o));
+
+  /* A batch of the same plan and of mixed plans, against serial rollouts on a copy. */
+  enum { N = 12 };
+  double bk[N * 8];
+  nds_rollout_out bo[N], so;
+  for (int i = 0; i < N; i++) {
+    memcpy(bk + 8 * i, keys, sizeof(keys));
+    if (i % 3) bk[8 * i + 1] += 0.004 * i, bk[8 * i + 6] -= 0.02 * i;
+  }
+  nds_batch_rollouts(b, &ctrl, &s0, (const double(*)[4])sp0, bk, N, 2, 0.3, bo);
+  nds_model serial;
+  assert_int_equal(nds_model_copy(&serial, &proto, err, sizeof(err)), 0);
+  mjData *sd = mj_makeData(serial.m);
+  for (int i = 0; i < N; i++) {
+    nds_rollout(&serial, sd, &ctrl, &s0, (const double(*)[4])sp0, bk + 8 * i, 2, 0.3, &so);
+    assert_memory_equal(&so, &bo[i], sizeof(so));
+    if (i % 3 == 0) assert_memory_equal(&ref, &bo[i], sizeof(so));
+  }
+  assert_true(bo[1].obj_xy[1] != bo[2].obj_xy[1]);
+
+  /* theta for the whole batch, checked before any model changes. */
+  const double bad[ND_NTHETA] = {1, 0.005, 1e-4, NAN};
+  assert_int_equal(nds_batch_set_theta(b, bad, err, sizeof(err)), -1);
+  assert_non_null(strstr(err, "sphere mass"));
+  assert_near(nds_batch_model(b, 1)->m->body_mass[proto.ee_body], 1.0, 0);
+  const double th[ND_NTHETA] = {0.6, 0.005, 1e-4, 0.7};
+  assert_int_equal(nds_batch_set_theta(b, th, err, sizeof(err)), 0);
+  for (int w = 0; w < 2; w++) {
+    assert_near(nds_batch_model(b, w)->m->body_mass[proto.ee_body], 0.7, 0);
+    assert_near(nds_batch_model(b, w)->m->geom_friction[0], 0.6, 0);
+  }
+  nds_batch_rollouts(b, &ctrl, &s0, (const double(*)[4])sp0, bk, 1, 2, 0.3, bo);
+  assert_true(memcmp(&bo[0], &ref, sizeof(ref)) != 0);
+
+  mj_deleteData(sd);
+  nds_model_free(&serial);
+  nds_batch_free(b);
+  nds_model_free(&proto);
+  nd_pool_free(pool);
+}
+
+/* Bad inputs and numerical blow-ups come back as diverged = 1, quietly, and leave the
+ * mjData fit for the next rollout. */
+static void test_divergence(void **state) {
+  (void)state;
+  nds_model nm;
+  nds_test_build(&nm, 0.01, NULL);
+  mjData *d = mj_makeData(nm.m);
+  nds_ctrl_cfg ctrl;
+  nds_ctrl_cfg_default(&ctrl);
+  nds_state s0;
+  double sp0[2][4];
+  free_start(&nm, &s0, sp0);
+  nds_rollout_out good, o;
+  nds_rollout(&nm, d, &ctrl, &s0, (const double(*)[4])sp0, free_keys, 2, 0.3, &good);
+  assert_int_equal(good.diverged, 0);
+
+  nds_state bad = s0;
+  bad.obj_quat[2] = NAN;
+  nds_rollout(&nm, d, &ctrl, &bad, (const double(*)[4])sp0, free_keys, 2, 0.3, &o);
+  assert_int_equal(o.diverged, 1);
+  double kb[8];
+  memcpy(kb, free_keys, sizeof(kb));
+  kb[5] = NAN;
+  nds_rollout(&nm, d, &ctrl, &s0, (const double(*)[4])sp0, kb, 2, 0.3, &o);
+  assert_int_equal(o.diverged, 1);
+  double spb[2][4];
+  memcpy(spb, sp0, sizeof(spb));
+  spb[1][ND_J] = INFINITY;
+  nds_rollout(&nm, d, &ctrl, &s0, (const double(*)[4])spb, free_keys, 2, 0.3, &o);
+  assert_int_equal(o.diverged, 1);
+  nds_rollout(&nm, d, &ctrl, &s0, (const double(*)[4])sp0, free_keys, 2, 0.0, &o);
+  assert_int_equal(o.diverged, 1);
+  nds_rollout(&nm, d, &ctrl, &s0, (const double(*)[4])sp0, free_keys, 0, 0.3, &o);
+  assert_int_equal(o.diverged, 1);
+  nds_rollout(&nm, d, &ctrl, &s0, (const double(*)[4])sp0, free_keys, ND_MAX_KEYS + 1, 0.3, &o);
+  assert_int_equal(o.diverged, 1);
+
+  /* Gains far beyond the explicit-integration bound. */
+  nds_ctrl_cfg wild = ctrl;
+  wild.kp = 1e9;
+  wild.kd = 0;
+  wild.f_max = INFINITY;
+  nds_rollout(&nm, d, &wild, &s0, (const double(*)[4])sp0, free_keys, 2, 0.3, &o);
+  assert_int_equal(o.diverged, 1);
+  /* Keypoints a million kilometres off, with no force limit to save the day. */
+  double kfar[8] = {1e9, -1e9, 1e9, 1e9, 1e9, 1e9, 0, 0};
+  nds_ctrl_cfg unsat = ctrl;
+  unsat.f_max = INFINITY;
+  nds_rollout(&nm, d, &unsat, &s0, (const double(*)[4])sp0, kfar, 2, 0.3, &o);
+  assert_int_equal(o.diverged, 1);
+  /* With the default saturation the same plan is merely far: finite and reported. */
+  nds_rollout(&nm, d, &ctrl, &s0, (const double(*)[4])sp0, kfar, 2, 0.3, &o);
+  assert_int_equal(o.diverged, 0);
+  assert_true(isfinite(o.ee_xy[0]) && o.ee_xy[0] > 1.0);
+  assert_true(o.v_peak > 1e9);
+
+  /* The mjData that diverged still gives the clean result. */
+  nds_rollout(&nm, d, &ctrl, &s0, (const double(*)[4])sp0, free_keys, 2, 0.3, &o);
+  assert_memory_equal(&good, &o, sizeof(o));
+  assert_int_equal(nds_test_warnings, 0);
+  mj_deleteData(d);
+  nds_model_free(&nm);
+}
+
+int main(void) {
+  nds_test_catch_warnings();
+  const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_tracks_keypoints),
+      cmocka_unit_test(test_light_sphere_coarse_step),
+      cmocka_unit_test(test_friction_changes_push),
+      cmocka_unit_test(test_deterministic),
+      cmocka_unit_test(test_divergence),
+  };
+  return cmocka_run_group_tests(tests, NULL, NULL);
+}

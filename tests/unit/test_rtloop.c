@@ -1,0 +1,754 @@
+/* test_rtloop: the executor's 1 kHz cycle (processes/exec_loop.c) allocates nothing
+ * and makes no blocking call, through every path it has.
+ *
+ * The test is linked with -Wl,--wrap for the allocator (malloc, calloc, realloc,
+ * reallocarray, free, posix_memalign, aligned_alloc, memalign, valloc, strdup, strndup)
+ * and for calls that can block or do I/O (write, read, stdio output, poll, sleeps,
+ * mutex and condition waits, fsync, lcm_publish). --wrap rewrites every reference to X
+ * in the objects of this link, the static libraries exec_loop, nd_core and
+ * nd_lcmtypes included, into __wrap_X; the wrappers below count calls while a window is
+ * open and go on to __real_X. One window spans 100k+ cycles on synthetic time, through
+ * the first robot state, plan switches at 20 Hz, plans stretched by the limits and plans
+ * refused by them, a stale plan (brake, hold), a stale robot state (brake, hold, plans
+ * kept waiting), plans refused for a keypoint outside the workspace, and a consumer that
+ * stops draining the ring until it is full. The count over the window must be exactly 0.
+ *
+ * That the count can fail is checked first: mallocs, a free and a write made inside a
+ * window, from this file and from inside nd_core, are all seen.
+ *
+ * Under ASan (build-asan runs label unit too) the count works the same: ASan replaces
+ * malloc by interposing its own at run time, behind the symbol the wrappers reach as
+ * __real_malloc; the link-time rewrite of the callers is untouched, so every call from
+ * the code under test still passes through a wrapper first. The self-check runs there as
+ * well and proves it.
+ *
+ * What --wrap cannot see: allocations made inside shared libraries (libc itself, e.g. a
+ * printf with a huge field width). The cycle's libc calls are memcpy, memset, math and,
+ * for a refused plan, snprintf of short numbers; the stdio calls that could allocate are
+ * the blocking ones, counted here. */
+#define _GNU_SOURCE
+#include <errno.h>
+#include <fcntl.h>
+#include <poll.h>
+#include <pthread.h>
+#include <stdarg.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "nd_test.h"
+#include "nd_exec.h"
+#include "nd_math.h"
+#include "nd_rng.h"
+#include "nd_rollout.h"
+#include "exec_loop.h"
+#include "nudge/nudge_ee_cmd_t.h"
+
+/* ---- the counting wrappers ------------------------------------------------------------ */
+
+enum {
+  C_MALLOC, C_CALLOC, C_REALLOC, C_REALLOCARRAY, C_FREE, C_POSIX_MEMALIGN, C_ALIGNED_ALLOC,
+  C_MEMALIGN, C_VALLOC, C_STRDUP, C_STRNDUP, N_ALLOC_FN,
+  C_WRITE = N_ALLOC_FN, C_READ, C_PRINTF, C_FPRINTF, C_VPRINTF, C_VFPRINTF, C_PUTS, C_FPUTS,
+  C_FWRITE, C_PUTCHAR, C_FPUTC, C_FFLUSH, C_POLL, C_NANOSLEEP, C_CLOCK_NANOSLEEP, C_USLEEP,
+  C_SLEEP, C_MUTEX_LOCK, C_COND_WAIT, C_COND_TIMEDWAIT, C_FSYNC, C_FDATASYNC, C_LCM_PUBLISH,
+  N_FN
+};
+
+static const char *const fn_name[N_FN] = {
+    "malloc", "calloc", "realloc", "reallocarray", "free", "posix_memalign",
+    "aligned_alloc", "memalign", "valloc", "strdup", "strndup", "write", "read", "printf",
+    "fprintf", "vprintf", "vfprintf", "puts", "fputs", "fwrite", "putchar", "fputc",
+    "fflush", "poll", "nanosleep", "clock_nanosleep", "usleep", "sleep",
+    "pthread_mutex_lock", "pthread_cond_wait", "pthread_cond_timedwait", "fsync",
+    "fdatasync", "lcm_publish"};
+
+/* Single-threaded test: plain ints. */
+static int g_window;
+static long g_count[N_FN];
+
+static void tally(int fn) {
+  if (g_window) g_count[fn]++;
+}
+
+static void window_open(void) {
+  memset(g_count, 0, sizeof g_count);
+  g_window = 1;
+}
+
+static void window_close(void) { g_window = 0; }
+
+static long window_sum(int from, int to) {
+  long n = 0;
+  for (int i = from; i < to; i++) n += g_count[i];
+  return n;
+}
+
+/* "malloc 2, free 1" for the functions counted in [from, to). */
+static void window_list(char *out, size_t cap, int from, int to) {
+  size_t k = 0;
+  out[0] = '\0';
+  for (int i = from; i < to && k < cap; i++)
+    if (g_count[i])
+      k += (size_t)snprintf(out + k, cap - k, "%s%s %ld", k ? ", " : "", fn_name[i],
+                            g_count[i]);
+}
+
+void *__real_malloc(size_t n);
+void *__real_calloc(size_t n, size_t size);
+void *__real_realloc(void *p, size_t n);
+void *__real_reallocarray(void *p, size_t n, size_t size);
+void __real_free(void *p);
+int __real_posix_memalign(void **p, size_t align, size_t n);
+void *__real_aligned_alloc(size_t align, size_t n);
+void *__real_memalign(size_t align, size_t n);
+void *__real_valloc(size_t n);
+char *__real_strdup(const char *s);
+char *__real_strndup(const char *s, size_t n);
+
+void *__wrap_malloc(size_t n) { tally(C_MALLOC); return __real_malloc(n); }
+void *__wrap_calloc(size_t n, size_t size) { tally(C_CALLOC); return __real_calloc(n, size); }
+void *__wrap_realloc(void *p, size_t n) { tally(C_REALLOC); return __real_realloc(p, n); }
+void *__wrap_reallocarray(void *p, size_t n, size_t size) {
+  tally(C_REALLOCARRAY);
+  return __real_reallocarray(p, n, size);
+}
+void __wrap_free(void *p) { tally(C_FREE); __real_free(p); }
+int __wrap_posix_memalign(void **p, size_t align, size_t n) {
+  tally(C_POSIX_MEMALIGN);
+  return __real_posix_memalign(p, align, n);
+}
+void *__wrap_aligned_alloc(size_t align, size_t n) {
+  tally(C_ALIGNED_ALLOC);
+  return __real_aligned_alloc(align, n);
+}
+void *__wrap_memalign(size_t align, size_t n) { tally(C_MEMALIGN); return __real_memalign(align, n); }
+void *__wrap_valloc(size_t n) { tally(C_VALLOC); return __real_valloc(n); }
+char *__wrap_strdup(const char *s) { tally(C_STRDUP); return __real_strdup(s); }
+char *__wrap_strndup(const char *s, size_t n) { tally(C_STRNDUP); return __real_strndup(s, n); }
+
+ssize_t __real_write(int fd, const void *b, size_t n);
+ssize_t __real_read(int fd, void *b, size_t n);
+int __real_vprintf(const char *fmt, va_list ap);
+int __real_vfprintf(FILE *f, const char *fmt, va_list ap);
+int __real_puts(const char *s);
+int __real_fputs(const char *s, FILE *f);
+size_t __real_fwrite(const void *p, size_t size, size_t n, FILE *f);
+int __real_putchar(int c);
+int __real_fputc(int c, FILE *f);
+int __real_fflush(FILE *f);
+int __real_poll(struct pollfd *fds, nfds_t n, int timeout);
+int __real_nanosleep(const struct timespec *req, struct timespec *rem);
+int __real_clock_nanosleep(clockid_t c, int flags, const struct timespec *req,
+                           struct timespec *rem);
+int __real_usleep(useconds_t us);
+unsigned __real_sleep(unsigned s);
+int __real_pthread_mutex_lock(pthread_mutex_t *m);
+int __real_pthread_cond_wait(pthread_cond_t *c, pthread_mutex_t *m);
+int __real_pthread_cond_timedwait(pthread_cond_t *c, pthread_mutex_t *m,
+                                  const struct timespec *t);
+int __real_fsync(int fd);
+int __real_fdatasync(int fd);
+int __real_lcm_publish(lcm_t *lcm, const char *ch, const void *data, unsigned int len);
+
+ssize_t __wrap_write(int fd, const void *b, size_t n) { tally(C_WRITE); return __real_write(fd, b, n); }
+ssize_t __wrap_read(int fd, void *b, size_t n) { tally(C_READ); return __real_read(fd, b, n); }
+int __wrap_vprintf(const char *fmt, va_list ap) { tally(C_VPRINTF); return __real_vprintf(fmt, ap); }
+int __wrap_vfprintf(FILE *f, const char *fmt, va_list ap) {
+  tally(C_VFPRINTF);
+  return __real_vfprintf(f, fmt, ap);
+}
+int __wrap_printf(const char *fmt, ...) {
+  tally(C_PRINTF);
+  va_list ap;
+  va_start(ap, fmt);
+  const int r = __real_vprintf(fmt, ap);
+  va_end(ap);
+  return r;
+}
+int __wrap_fprintf(FILE *f, const char *fmt, ...) {
+  tally(C_FPRINTF);
+  va_list ap;
+  va_start(ap, fmt);
+  const int r = __real_vfprintf(f, fmt, ap);
+  va_end(ap);
+  return r;
+}
+int __wrap_puts(const char *s) { tally(C_PUTS); return __real_puts(s); }
+int __wrap_fputs(const char *s, FILE *f) { tally(C_FPUTS); return __real_fputs(s, f); }
+size_t __wrap_fwrite(const void *p, size_t size, size_t n, FILE *f) {
+  tally(C_FWRITE);
+  return __real_fwrite(p, size, n, f);
+}
+int __wrap_putchar(int c) { tally(C_PUTCHAR); return __real_putchar(c); }
+int __wrap_fputc(int c, FILE *f) { tally(C_FPUTC); return __real_fputc(c, f); }
+int __wrap_fflush(FILE *f) { tally(C_FFLUSH); return __real_fflush(f); }
+int __wrap_poll(struct pollfd *fds, nfds_t n, int timeout) {
+  tally(C_POLL);
+  return __real_poll(fds, n, timeout);
+}
+int __wrap_nanosleep(const struct timespec *req, struct timespec *rem) {
+  tally(C_NANOSLEEP);
+  return __real_nanosleep(req, rem);
+}
+int __wrap_clock_nanosleep(clockid_t c, int flags, const struct timespec *req,
+                           struct timespec *rem) {
+  tally(C_CLOCK_NANOSLEEP);
+  return __real_clock_nanosleep(c, flags, req, rem);
+}
+int __wrap_usleep(useconds_t us) { tally(C_USLEEP); return __real_usleep(us); }
+unsigned __wrap_sleep(unsigned s) { tally(C_SLEEP); return __real_sleep(s); }
+int __wrap_pthread_mutex_lock(pthread_mutex_t *m) {
+  tally(C_MUTEX_LOCK);
+  return __real_pthread_mutex_lock(m);
+}
+int __wrap_pthread_cond_wait(pthread_cond_t *c, pthread_mutex_t *m) {
+  tally(C_COND_WAIT);
+  return __real_pthread_cond_wait(c, m);
+}
+int __wrap_pthread_cond_timedwait(pthread_cond_t *c, pthread_mutex_t *m,
+                                  const struct timespec *t) {
+  tally(C_COND_TIMEDWAIT);
+  return __real_pthread_cond_timedwait(c, m, t);
+}
+int __wrap_fsync(int fd) { tally(C_FSYNC); return __real_fsync(fd); }
+int __wrap_fdatasync(int fd) { tally(C_FDATASYNC); return __real_fdatasync(fd); }
+int __wrap_lcm_publish(lcm_t *lcm, const char *ch, const void *data, unsigned int len) {
+  tally(C_LCM_PUBLISH);
+  return __real_lcm_publish(lcm, ch, data, len);
+}
+
+/* ---- the counter sees what it should ---------------------------------------------------- */
+
+static void *volatile g_sink;  /* keeps the compiler from dropping a malloc/free pair */
+
+static void test_counter_sees_calls(void **state) {
+  (void)state;
+  window_open();
+  g_sink = malloc(40);
+  free(g_sink);
+  const long here = g_count[C_MALLOC];
+  /* From inside a static library: nd_core's own allocations are rewritten too. */
+  const long before_lib = window_sum(0, N_ALLOC_FN);
+  nd_rollout r;
+  assert_int_equal(nd_rollout_alloc(&r, 16), 0);
+  const long lib = window_sum(0, N_ALLOC_FN) - before_lib;
+  nd_rollout_free(&r);
+  const int fd = open("/dev/null", O_WRONLY | O_CLOEXEC);
+  const ssize_t w = write(fd, "x", 1);
+  window_close();
+  close(fd);
+  char seen[256];
+  window_list(seen, sizeof seen, 0, N_FN);
+  printf("rtloop_selfcheck_seen: %s\n", seen);
+  assert_int_equal(w, 1);
+  assert_int_equal(here, 1);
+  assert_true(lib >= 1);
+  assert_true(g_count[C_FREE] >= 2);
+  assert_int_equal(g_count[C_WRITE], 1);
+  /* Outside a window nothing is counted. */
+  const long before = window_sum(0, N_FN);
+  g_sink = malloc(8);
+  free(g_sink);
+  assert_int_equal(window_sum(0, N_FN), before);
+}
+
+/* ---- the loop on synthetic time --------------------------------------------------------- */
+
+#define DT 1e-3
+#define T0 1000.0               /* s, the synthetic monotonic clock's start */
+#define U0 1700000000000000LL   /* us, wall clock at T0 */
+#define EPISODE 4000            /* cycles of one round of the scenario below */
+#define EPISODES 26             /* 104k cycles */
+#define PRE 50                  /* cycles before the first robot state */
+
+/* One round, in cycles from its start: plans at 20 Hz with robot state at 1 kHz; then no
+ * plan (stale plan: brake, hold); plans again; then no robot state (stale state: brake,
+ * hold, the plans that keep coming wait); then the consumer stops draining (ring full). */
+enum { PH_PLAN_STALE = 1500, PH_PLAN_BACK = 2200, PH_STATE_STALE = 2700,
+       PH_STATE_BACK = 3400, PH_NO_DRAIN = 3500, PH_DRAIN = 3900 };
+
+/* What the window saw; asserted after it closes (no cmocka call inside). */
+typedef struct {
+  long cycles, ret_none, ret_sent, ret_full;
+  long popped, decode_bad, seq_gaps;
+  long plans_posted, plans_far, plans_bad, plans_out, stretched;
+  long plans_late;                       /* sent LATE_S ago, taken while the state is live */
+  long track_no_plan, track_old_plan;    /* tracking setpoints naming no plan / a stale one */
+  double plan_age_max;                   /* s, oldest plan a tracking setpoint named */
+  long over_v, over_a, step_p, step_v;   /* limit or continuity violations */
+  long hold_moved;                       /* a HOLD setpoint that moved or was not still */
+  long hold_at_plan_stale, hold_at_state_stale, checks_plan_stale, checks_state_stale;
+  long resumed;                          /* tracking again after a stale spell */
+  double peak_v, peak_a;                 /* max |v| / v_max, |a| / a_max */
+  double t_cycle_max;                    /* s, one cycle's longest run (figure only) */
+  double t_cycles;                       /* s, all cycles */
+  exec_loop_report rep;               /* the newest report taken */
+  int stale_bits_seen;                   /* union of the reports' stale bits */
+} run_stats;
+
+static double mono(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+#define TIMEOUT 0.1             /* s, the executor's default input timeout */
+#define LATE_S 0.5              /* s, how long ago a late plan was sent */
+
+/* Every 13th plan was sent LATE_S ago: what an executor resuming from a stall finds
+ * queued. The loop must drop it (counted as late), never follow it. */
+static int plan_is_late(long k) { return k % 13 == 0; }
+
+/* A plan toward a keypoint near p: mostly reachable ones (T 0.3 s, as the planner's),
+ * every 7th far and fast to do (the limits stretch it), every 11th faster than v_max at
+ * the keypoint (refused), every 17th with its second keypoint outside the workspace
+ * (refused); late ones are reachable. */
+static void make_plan(nd_rng *r, long k, const double p[2], const nd_exec_cfg *cfg,
+                      exec_loop_plan_in *pl, run_stats *st) {
+  const double dir = 2.0 * ND_PI * nd_rng_uniform(r);
+  double reach = 0.1 * nd_rng_uniform(r), speed = 0.3 * cfg->v_max * nd_rng_uniform(r);
+  pl->T = 0.3;
+  if (plan_is_late(k)) {
+  } else if (k % 11 == 0) {
+    speed = 1.5 * cfg->v_max;
+    st->plans_bad++;
+  } else if (k % 7 == 0) {
+    reach = 0.4;
+    pl->T = 0.05;
+    st->plans_far++;
+  }
+  for (int ax = 0; ax < 2; ax++) {
+    const double c = ax ? sin(dir) : cos(dir);
+    double x = p[ax] + reach * c;
+    if (x > 0.5) x = 0.5;
+    if (x < -0.5) x = -0.5;
+    pl->keys[0][ax] = x;
+    pl->keys[0][2 + ax] = speed * c;
+  }
+  pl->M = 2;
+  memcpy(pl->keys[1], pl->keys[0], sizeof pl->keys[1]);
+  if (!plan_is_late(k) && k % 11 && k % 7 && k % 17 == 0) {
+    pl->keys[1][0] = 0.8;
+    st->plans_out++;
+  }
+  pl->plan_id = k;
+  st->plans_posted++;
+}
+
+/* Consume one setpoint from the ring as the I/O thread would, and check it against the
+ * limits and against the previous one. */
+static void check_setpoint(const unsigned char *buf, int len, const nd_exec_cfg *cfg,
+                           nudge_ee_cmd_t *prev, int *have_prev, run_stats *st) {
+  nudge_ee_cmd_t m;
+  if (nudge_ee_cmd_t_decode(buf, 0, len, &m) != len) {
+    st->decode_bad++;
+    return;
+  }
+  st->popped++;
+  const double v = hypot(m.v[0], m.v[1]), a = hypot(m.a[0], m.a[1]);
+  if (v > cfg->v_max * (1 + 1e-9)) st->over_v++;
+  if (a > cfg->a_max * (1 + 1e-9)) st->over_a++;
+  if (v / cfg->v_max > st->peak_v) st->peak_v = v / cfg->v_max;
+  if (a / cfg->a_max > st->peak_a) st->peak_a = a / cfg->a_max;
+  if (m.mode == ND_EXEC_HOLD && (v != 0.0 || a != 0.0)) st->hold_moved++;
+  if (m.mode == ND_EXEC_TRACK) {
+    /* Tracking names its plan, and that plan is at most the timeout old (+ a period). */
+    const double age = 1e-6 * (double)(m.utime - m.plan_utime);
+    if (m.plan_utime <= 0 || m.plan_id < 0) st->track_no_plan++;
+    else if (age > TIMEOUT + DT) st->track_old_plan++;
+    if (m.plan_utime > 0 && age > st->plan_age_max) st->plan_age_max = age;
+  }
+  if (*have_prev && m.seq == prev->seq + 1) {
+    const double dp = hypot(m.p[0] - prev->p[0], m.p[1] - prev->p[1]);
+    const double dv = hypot(m.v[0] - prev->v[0], m.v[1] - prev->v[1]);
+    if (dp > cfg->v_max * DT * (1 + 1e-6)) st->step_p++;
+    if (dv > cfg->a_max * DT * (1 + 1e-6)) st->step_v++;
+    if (m.mode == ND_EXEC_HOLD && prev->mode == ND_EXEC_HOLD &&
+        (m.p[0] != prev->p[0] || m.p[1] != prev->p[1]))
+      st->hold_moved++;
+  } else if (*have_prev) {
+    st->seq_gaps++;
+  }
+  *prev = m;
+  *have_prev = 1;
+}
+
+/* Run the scenario; everything between window_open and window_close is what a 1 kHz
+ * cycle and its I/O thread do, on one thread and a synthetic clock. */
+static void run_scenario(exec_loop *s, exec_loop_io *io, const nd_exec_cfg *cfg,
+                         run_stats *st) {
+  nd_rng rng;
+  nd_rng_seed(&rng, 5, 0);
+  nudge_ee_cmd_t prev;
+  memset(&prev, 0, sizeof prev);
+  int have_prev = 0, was_stale = 0;
+  uint64_t v_rep = 0;
+  long plan_k = 1;
+  double last_p[2] = {0.0, 0.0};
+  double t_state = -1e9;        /* send time of the newest robot state posted */
+  const long total = PRE + (long)EPISODES * EPISODE;
+
+  window_open();
+  for (long k = 0; k < total; k++) {
+    const double now = T0 + DT * (double)k;
+    const int64_t utime = U0 + 1000 * k;
+    const long e = k < PRE ? -1 : (k - PRE) % EPISODE;
+
+    /* The I/O thread's side: a robot state every ms (it arrived 0.2 ms ago), a plan
+     * every 50 ms, each posted only in the phases that have them. */
+    const int state_on = e >= 0 && !(e >= PH_STATE_STALE && e < PH_STATE_BACK);
+    const int plan_on = e >= 0 && !(e >= PH_PLAN_STALE && e < PH_PLAN_BACK);
+    if (state_on) {
+      exec_loop_state_in in = {now - 2e-4, {last_p[0], last_p[1], 0.025}};
+      if (!have_prev) in.ee_pos[0] = 0.05, in.ee_pos[1] = -0.02;
+      nd_mailbox_post(&io->state, &in, (int)sizeof in);
+      t_state = in.t_arrive;
+    }
+    if (plan_on && e % 50 == 0) {
+      exec_loop_plan_in pl;
+      const double sent_ago = plan_is_late(plan_k) ? LATE_S : 2e-4;
+      pl.t_arrive = now - sent_ago;
+      pl.utime = utime - (int64_t)llround(1e6 * sent_ago);
+      /* The loop takes a plan at once while the state is fresh; while it is stale the plan
+       * waits and the next one replaces it. */
+      if (plan_is_late(plan_k) && now - t_state <= TIMEOUT) st->plans_late++;
+      make_plan(&rng, plan_k++, last_p, cfg, &pl, st);
+      nd_mailbox_post(&io->plan, &pl, (int)sizeof pl);
+    }
+
+    /* The cycle. */
+    const int64_t accepted0 = s->rep.accepted;
+    const double t0 = mono();
+    const int rc = exec_loop_cycle(s, now, utime);
+    const double t1 = mono() - t0;
+    st->t_cycles += t1;
+    if (t1 > st->t_cycle_max) st->t_cycle_max = t1;
+    st->cycles++;
+    if (rc == 0) st->ret_none++;
+    else if (rc > 0) st->ret_sent++;
+    else st->ret_full++;
+    if (s->rep.accepted != accepted0 && s->ex.seg.T > s->plan.T * (1 + 1e-9)) st->stretched++;
+
+    /* At the end of each stale spell the robot must be at rest. */
+    if (e == PH_PLAN_BACK - 1) {
+      st->checks_plan_stale++;
+      if (s->rep.mode == ND_EXEC_HOLD && (s->rep.stale & EXEC_STALE_PLAN))
+        st->hold_at_plan_stale++;
+    }
+    if (e == PH_STATE_BACK - 1) {
+      st->checks_state_stale++;
+      if (s->rep.mode == ND_EXEC_HOLD && (s->rep.stale & EXEC_STALE_STATE))
+        st->hold_at_state_stale++;
+    }
+    if (was_stale && !s->rep.stale && s->rep.mode == ND_EXEC_TRACK) st->resumed++;
+    was_stale = s->rep.stale != 0;
+
+    /* The consumer drains the ring, except while it is made to fall behind. */
+    if (!(e >= PH_NO_DRAIN && e < PH_DRAIN)) {
+      unsigned char buf[ND_RTIO_MAX];
+      int tag, len;
+      while ((len = nd_ring_pop(&io->ring, &tag, buf, sizeof buf)) >= 0) {
+        if (tag == EXEC_LOOP_TAG_EE_CMD)
+          check_setpoint(buf, len, cfg, &prev, &have_prev, st);
+      }
+      if (have_prev) last_p[0] = prev.p[0], last_p[1] = prev.p[1];
+    }
+    if (k % 10 == 0 &&
+        nd_mailbox_take(&io->report, &v_rep, &st->rep, (int)sizeof st->rep) ==
+            (int)sizeof st->rep)
+      st->stale_bits_seen |= st->rep.stale;
+  }
+  window_close();
+}
+
+static exec_loop_io g_io;  /* 260 kB: static, like the executor's */
+static exec_loop g_loop;
+
+static void test_cycle_allocates_nothing(void **state) {
+  (void)state;
+  const nd_exec_cfg cfg = nd_exec_cfg_default();
+  exec_loop_io_init(&g_io);
+  exec_loop_init(&g_loop, &cfg, TIMEOUT, &g_io);
+  run_stats st;
+  memset(&st, 0, sizeof st);
+  run_scenario(&g_loop, &g_io, &cfg, &st);
+  exec_loop_report_post(&g_loop, T0 + 1e6, 1);
+  uint64_t v = 0;
+  assert_int_equal(nd_mailbox_take(&g_io.report, &v, &st.rep, (int)sizeof st.rep),
+                   (int)sizeof st.rep);
+
+  char allocs[512], blocking[512];
+  window_list(allocs, sizeof allocs, 0, N_ALLOC_FN);
+  window_list(blocking, sizeof blocking, N_ALLOC_FN, N_FN);
+  const long n_alloc = window_sum(0, N_ALLOC_FN), n_block = window_sum(N_ALLOC_FN, N_FN);
+  const uint64_t drops = atomic_load(&g_io.ring.dropped);
+  printf("rtloop_cycles %ld count\n", st.cycles);
+  printf("rtloop_alloc_calls %ld count\n", n_alloc);
+  printf("rtloop_blocking_calls %ld count\n", n_block);
+  printf("rtloop_plans_accepted %lld count\n", (long long)st.rep.accepted);
+  printf("rtloop_plans_refused %lld count\n", (long long)st.rep.refused);
+  printf("rtloop_plans_refused_workspace %lld count\n", (long long)st.rep.refused_box);
+  printf("rtloop_plans_stretched %ld count\n", st.stretched);
+  printf("rtloop_plans_late %lld count\n", (long long)st.rep.late);
+  printf("rtloop_plan_age_max %.1f ms\n", 1e3 * st.plan_age_max);
+  printf("rtloop_stale_spells %lld count\n", (long long)st.rep.n_stale);
+  printf("rtloop_ring_full_cycles %ld count\n", st.ret_full);
+  printf("rtloop_ring_drops %llu count\n", (unsigned long long)drops);
+  printf("rtloop_peak_speed %.3f v_max\n", st.peak_v);
+  printf("rtloop_peak_accel %.3f a_max\n", st.peak_a);
+  printf("rtloop_cycle_mean %.2f us\n", 1e6 * st.t_cycles / (double)st.cycles);
+  printf("rtloop_cycle_max %.1f us\n", 1e6 * st.t_cycle_max);
+
+  /* The point of the test. */
+  if (n_alloc) fail_msg("the cycle allocated inside the window: %s", allocs);
+  if (n_block) fail_msg("the cycle made blocking calls inside the window: %s", blocking);
+
+  /* The window went through every path it claims to. */
+  assert_true(st.cycles >= 100000);
+  assert_int_equal(st.ret_none, PRE);
+  assert_int_equal(st.rep.cycles, st.cycles);
+  assert_true(st.rep.accepted >= 20 * EPISODES);        /* plan switches */
+  assert_true(st.rep.refused >= EPISODES);              /* limits: refused */
+  assert_true(st.plans_out > 0);                        /* workspace: refused */
+  assert_true(st.rep.refused_box >= EPISODES / 2);
+  assert_true(st.stretched >= EPISODES);                /* limits: stretched */
+  assert_true(st.plans_far > 0 && st.plans_bad > 0);
+  assert_true(st.plans_late >= EPISODES);               /* sent long ago: dropped */
+  assert_int_equal(st.rep.late, st.plans_late);
+  assert_int_equal(st.stale_bits_seen & (EXEC_STALE_PLAN | EXEC_STALE_STATE),
+                   EXEC_STALE_PLAN | EXEC_STALE_STATE);
+  assert_true(st.rep.n_stale >= 2 * EPISODES);
+  assert_true(st.resumed >= 2 * EPISODES);
+  assert_int_equal(st.hold_at_plan_stale, st.checks_plan_stale);
+  assert_int_equal(st.hold_at_state_stale, st.checks_state_stale);
+  assert_int_equal(st.checks_plan_stale, EPISODES);
+  /* Ring full: 400 undrained cycles against 256 slots, every round. */
+  assert_true(st.ret_full >= (long)EPISODES * (PH_DRAIN - PH_NO_DRAIN - ND_RING_SLOTS));
+  assert_int_equal((long)drops, st.ret_full);
+  assert_int_equal(st.rep.sent, st.ret_sent);
+  /* What the consumer saw obeys the limits and is continuous (gaps: the drops). */
+  assert_int_equal(st.decode_bad, 0);
+  assert_int_equal(st.popped, st.ret_sent);  /* the last round ends draining */
+  assert_int_equal(st.over_v + st.over_a, 0);
+  assert_int_equal(st.step_p + st.step_v, 0);
+  assert_int_equal(st.hold_moved, 0);
+  /* Every tracking setpoint names a plan no older than the timeout: never a late one. */
+  assert_int_equal(st.track_no_plan, 0);
+  assert_int_equal(st.track_old_plan, 0);
+  assert_true(st.plan_age_max > 0.5 * TIMEOUT);  /* the plan-stale spells age it */
+  assert_true(st.seq_gaps >= EPISODES);
+  assert_true(st.peak_a > 0.5);  /* the far plans drive it near its limits */
+}
+
+/* The robot state as the loop's input: the sphere at p, received 0.2 ms before now. */
+static void post_state(double now, const double p[2]) {
+  exec_loop_state_in in = {now - 2e-4, {p[0], p[1], 0.025}};
+  nd_mailbox_post(&g_io.state, &in, (int)sizeof in);
+}
+
+/* The next EE_CMD the loop left in the ring (other messages skipped): 1, or 0 when none. */
+static int pop_ee_cmd(nudge_ee_cmd_t *m) {
+  unsigned char buf[ND_RTIO_MAX];
+  int tag, len;
+  while ((len = nd_ring_pop(&g_io.ring, &tag, buf, sizeof buf)) >= 0)
+    if (tag == EXEC_LOOP_TAG_EE_CMD && nudge_ee_cmd_t_decode(buf, 0, len, m) == len) return 1;
+  return 0;
+}
+
+/* After a planner restart the robot is at rest and the new planner, finding nothing
+ * better, re-sends one plan at 20 Hz: a keypoint 25 mm ahead to be passed at 0.25 m/s,
+ * its segment 0.25 s (0.3 s shortened by the 50 ms its state had aged). Restarting the
+ * segment on every copy kept the robot within 2 mm of where it stood for good (the first
+ * 50 ms of such a segment wind up rather than advance): test_planner_kill's task then
+ * timed out. The loop must keep the segment and reach the keypoint when it is due, while
+ * every setpoint names the newest plan. */
+static void test_resent_plan_after_restart(void **state) {
+  (void)state;
+  const nd_exec_cfg cfg = nd_exec_cfg_default();
+  exec_loop_io_init(&g_io);
+  exec_loop_init(&g_loop, &cfg, TIMEOUT, &g_io);
+  const double start[2] = {0.03, -0.04};
+  enum { DEAD = 600, BACK = 1000, END = 3000 };  /* ms: planner killed / restarted / end */
+  double key[4] = {0};
+  double p[2] = {start[0], start[1]}, hold[2] = {0.0, 0.0};
+  double t_first = 0.0, t_reach = -1.0, moved = 0.0;
+  long resumed_tracking = 0, named_old = 0, stale_after = 0, held_at_restart = 0;
+  int64_t last_id = 0;
+  window_open();
+  for (long k = 0; k < END; k++) {
+    const double now = T0 + DT * (double)k;
+    const int64_t utime = U0 + 1000 * k;
+    post_state(now, p);
+    exec_loop_plan_in pl;
+    pl.t_arrive = now - 2e-4;
+    pl.utime = utime - 200;
+    if (k < DEAD && k % 50 == 0) {
+      /* The first planner: a new keypoint every plan, the robot moving. */
+      pl.plan_id = 100 + k / 50;
+      pl.T = 0.3;
+      const double f = 0.01 * (double)(k / 50);
+      double k0[4] = {start[0] + 0.02 + f, start[1] + 0.5 * f, 0.1, 0.05};
+      pl.M = 1;
+      memcpy(pl.keys[0], k0, sizeof k0);
+      nd_mailbox_post(&g_io.plan, &pl, (int)sizeof pl);
+    } else if (k >= BACK && k % 50 == 0) {
+      if (k == BACK) {
+        held_at_restart = g_loop.rep.mode == ND_EXEC_HOLD;
+        hold[0] = p[0], hold[1] = p[1];
+        const double k0[4] = {p[0] + 0.025, p[1] + 0.004, 0.25, 0.04};
+        memcpy(key, k0, sizeof key);
+        t_first = now;
+      }
+      pl.plan_id = 1 + (k - BACK) / 50;  /* the restarted planner counts from 1 */
+      pl.T = 0.25;
+      pl.M = 1;
+      memcpy(pl.keys[0], key, sizeof key);
+      nd_mailbox_post(&g_io.plan, &pl, (int)sizeof pl);
+      last_id = pl.plan_id;
+    }
+    exec_loop_cycle(&g_loop, now, utime);
+    nudge_ee_cmd_t m;
+    while (pop_ee_cmd(&m)) {
+      p[0] = m.p[0], p[1] = m.p[1];
+      if (k < BACK) continue;
+      if (m.mode == ND_EXEC_TRACK) resumed_tracking++;
+      if (m.plan_id >= 100) named_old++;
+      if (k > BACK && g_loop.rep.stale) stale_after++;
+      const double d = hypot(m.p[0] - hold[0], m.p[1] - hold[1]);
+      if (d > moved) moved = d;
+      if (t_reach < 0.0 && hypot(m.p[0] - key[0], m.p[1] - key[1]) < 1e-3) t_reach = now;
+    }
+  }
+  window_close();
+  const long n_calls = window_sum(0, N_FN);
+  exec_loop_report_post(&g_loop, T0 + 1e6, 1);
+  exec_loop_report rep;
+  uint64_t v = 0;
+  assert_int_equal(nd_mailbox_take(&g_io.report, &v, &rep, (int)sizeof rep), (int)sizeof rep);
+  printf("rtloop_restart_moved %.1f mm\n", 1e3 * moved);
+  printf("rtloop_restart_reached %.3f s\n", t_reach < 0.0 ? -1.0 : t_reach - t_first);
+  printf("rtloop_restart_kept %lld count\n", (long long)rep.kept);
+  assert_int_equal(n_calls, 0);
+  assert_true(held_at_restart);  /* the dead planner's plans went stale: at rest */
+  assert_true(resumed_tracking > 0);
+  assert_int_equal(named_old, 0);
+  assert_int_equal(stale_after, 0);
+  assert_int_equal(rep.plan_id, last_id);
+  /* The point: the keypoint is reached when due (0.25 s after the first copy), not never. */
+  if (t_reach < 0.0)
+    fail_msg("the setpoint never came within 1 mm of the re-sent keypoint: it moved at most "
+             "%.1f mm of %.1f mm", 1e3 * moved, 1e3 * hypot(key[0] - hold[0], key[1] - hold[1]));
+  assert_true(t_reach - t_first <= 0.25 + 2 * DT);
+  assert_true(moved > 0.02);
+  /* Every copy after the first renewed the segment instead of restarting it. */
+  assert_true(rep.kept >= 4);
+}
+
+/* The workspace at the loop: a plan whose keypoint lies at (0.8, 0), outside the default
+ * box, is refused and counted, and the robot stays exactly where it is (no plan was ever
+ * taken: it holds). A plan inside the box is then followed to its keypoint. Plans whose
+ * first keypoint is inside but whose second is at (0.8, 0) are refused too, and the robot
+ * stays at rest where the good plan left it. */
+static void test_workspace_plans(void **state) {
+  (void)state;
+  const nd_exec_cfg cfg = nd_exec_cfg_default();
+  exec_loop_io_init(&g_io);
+  exec_loop_init(&g_loop, &cfg, TIMEOUT, &g_io);
+  enum { IN = 500, BAD2 = 1000, END = 1500 };  /* ms: phase starts */
+  const double start[2] = {0.1, 0.0}, out_key[4] = {0.8, 0.0, 0.0, 0.0};
+  const double in_key[4] = {0.3, 0.1, 0.0, 0.0}, in_next[4] = {0.35, 0.1, 0.0, 0.0};
+  double p[2] = {start[0], start[1]};
+  double x_max_out = -1.0, x_max_bad2 = -1.0, p_in[2] = {0.0, 0.0};
+  long posted_out = 0, posted_bad2 = 0, moved_out = 0, moved_bad2 = 0;
+  int64_t refused_at_in = 0, box_at_in = 0, refused_at_bad2 = 0;
+  char why_out[160] = "", why_bad2[160] = "";
+  window_open();
+  for (long k = 0; k < END; k++) {
+    const double now = T0 + DT * (double)k;
+    const int64_t utime = U0 + 1000 * k;
+    post_state(now, p);
+    if (k % 50 == 0) {
+      exec_loop_plan_in pl;
+      memset(&pl, 0, sizeof pl);
+      pl.t_arrive = now - 2e-4;
+      pl.utime = utime - 200;
+      pl.plan_id = 1 + k / 50;
+      pl.T = 0.3;
+      pl.M = 2;
+      if (k < IN) {
+        memcpy(pl.keys[0], out_key, sizeof out_key);
+        memcpy(pl.keys[1], out_key, sizeof out_key);
+        posted_out++;
+      } else if (k < BAD2) {
+        memcpy(pl.keys[0], in_key, sizeof in_key);
+        memcpy(pl.keys[1], in_next, sizeof in_next);
+      } else {
+        memcpy(pl.keys[0], in_next, sizeof in_next);
+        memcpy(pl.keys[1], out_key, sizeof out_key);
+        posted_bad2++;
+      }
+      nd_mailbox_post(&g_io.plan, &pl, (int)sizeof pl);
+    }
+    if (k == IN) {
+      refused_at_in = g_loop.rep.refused;
+      box_at_in = g_loop.rep.refused_box;
+      memcpy(why_out, g_loop.rep.refused_why, sizeof why_out);
+    }
+    if (k == BAD2) {
+      refused_at_bad2 = g_loop.rep.refused;
+      p_in[0] = p[0], p_in[1] = p[1];
+    }
+    exec_loop_cycle(&g_loop, now, utime);
+    nudge_ee_cmd_t m;
+    while (pop_ee_cmd(&m)) {
+      p[0] = m.p[0], p[1] = m.p[1];
+      if (k < IN) {
+        x_max_out = fmax(x_max_out, m.p[0]);
+        moved_out += m.p[0] != start[0] || m.p[1] != start[1] || m.mode != ND_EXEC_HOLD;
+      } else if (k >= BAD2) {
+        x_max_bad2 = fmax(x_max_bad2, m.p[0]);
+        /* At rest on its keypoint, re-planned there: rounding moves it by ~1e-17 m. */
+        moved_bad2 += hypot(m.p[0] - p_in[0], m.p[1] - p_in[1]) > 1e-9;
+      }
+    }
+  }
+  window_close();
+  memcpy(why_bad2, g_loop.rep.refused_why, sizeof why_bad2);
+  const long n_calls = window_sum(0, N_FN);
+  printf("rtloop_workspace_refused %lld count (of %ld + %ld posted outside)\n",
+         (long long)g_loop.rep.refused, posted_out, posted_bad2);
+  printf("rtloop_workspace_x_max_while_refusing %.6f m\n", x_max_out);
+  printf("rtloop_workspace_reached (%.4f, %.4f) m\n", p_in[0], p_in[1]);
+  printf("rtloop_workspace_why_first: %s\nrtloop_workspace_why_second: %s\n", why_out,
+         why_bad2);
+  assert_int_equal(n_calls, 0);
+  /* Refused and counted, each one; the robot never moved toward (0.8, 0). */
+  assert_int_equal(refused_at_in, posted_out);
+  assert_int_equal(box_at_in, posted_out);
+  assert_non_null(strstr(why_out, "keypoint 0 (0.800, 0.000) is outside the workspace"));
+  assert_non_null(strstr(why_out, "x [-0.500, 0.500], y [-0.500, 0.500]"));
+  assert_int_equal(moved_out, 0);
+  assert_true(x_max_out == start[0]);
+  /* The plan in the box is followed to its keypoint. */
+  assert_near(p_in[0], in_key[0], 1e-6);
+  assert_near(p_in[1], in_key[1], 1e-6);
+  /* A later keypoint outside refuses the plan too: no step toward (0.35, 0.1) or beyond. */
+  assert_int_equal(g_loop.rep.refused - refused_at_bad2, posted_bad2);
+  assert_int_equal(g_loop.rep.refused_box, posted_out + posted_bad2);
+  assert_non_null(strstr(why_bad2, "keypoint 1 (0.800, 0.000)"));
+  assert_int_equal(moved_bad2, 0);
+  assert_true(x_max_bad2 <= p_in[0] + 1e-9);
+  assert_int_equal(g_loop.rep.mode, ND_EXEC_HOLD);
+}
+
+int main(void) {
+  const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_counter_sees_calls),
+      cmocka_unit_test(test_cycle_allocates_nothing),
+      cmocka_unit_test(test_resent_plan_after_restart),
+      cmocka_unit_test(test_workspace_plans),
+  };
+  return cmocka_run_group_tests(tests, NULL, NULL);
+}
