@@ -158,7 +158,7 @@ int nd_goal_list_load(const char *path, nd_goal *out, int cap, int *n, char *err
 int nd_goal_parse_arg(const char *s, nd_goal *g, char *err, int errlen) {
   char buf[256], msg[256];
   if (!s || strlen(s) >= sizeof(buf)) {
-    snprintf(err, errlen, "--goal: expected X,Y,YAW (m, m, rad)");
+    snprintf(err, errlen, "expected X,Y,YAW (m, m, rad)");
     return -1;
   }
   strcpy(buf, s);
@@ -172,11 +172,11 @@ int nd_goal_parse_arg(const char *s, nd_goal *g, char *err, int errlen) {
     *p = '\0';
   }
   if (nf < 3 || nf > MAX_FIELDS) {
-    snprintf(err, errlen, "--goal '%s': expected X,Y,YAW[,EPS[,TIME_LIMIT]] (m, m, rad)", s);
+    snprintf(err, errlen, "'%s': expected X,Y,YAW[,EPS[,TIME_LIMIT]] (m, m, rad)", s);
     return -1;
   }
   if (parse_fields(tok, nf, g, msg, sizeof(msg))) {
-    snprintf(err, errlen, "--goal '%s': %s", s, msg);
+    snprintf(err, errlen, "'%s': %s", s, msg);
     return -1;
   }
   g->line = 0;

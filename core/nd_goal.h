@@ -35,7 +35,8 @@ int nd_goal_list_parse(const char *buf, size_t len, const char *name, nd_goal *o
 /* Read and parse file path (at most 1 MiB) as nd_goal_list_parse does. Return 0 or -1. */
 int nd_goal_list_load(const char *path, nd_goal *out, int cap, int *n, char *err, int errlen);
 
-/* Parse one command-line goal "X,Y,YAW" into *g (eps, tau 0). Return 0, or -1. */
+/* Parse one goal "X,Y,YAW[,EPS[,TIME_LIMIT]]" (a command line's) into *g. Return 0, or -1
+ * with a message quoting s. */
 int nd_goal_parse_arg(const char *s, nd_goal *g, char *err, int errlen);
 
 #endif

@@ -7,9 +7,6 @@
 #include <string.h>
 #include <sys/stat.h>
 
-static const char *names[ND_NTHETA] = {"sliding friction", "torsional friction",
-                                                 "rolling friction", "sphere mass"};
-
 int nd_history_check(const nd_history_entry *e, char *err, int errlen) {
   if (e->mask < 1 || e->mask > 15) {
     snprintf(err, errlen, "fit mask %u: must be in [1, 15]", (unsigned)e->mask);
@@ -27,16 +24,17 @@ int nd_history_check(const nd_history_entry *e, char *err, int errlen) {
     snprintf(err, errlen, "buffer_created %lld: negative", (long long)e->buffer_created);
     return -1;
   }
+  char why[200];
+  if (nd_theta_check(e->mean, why, sizeof(why))) {
+    snprintf(err, errlen, "mean: %s", why);
+    return -1;
+  }
   for (int i = 0; i < ND_NTHETA; i++) {
-    const double m = e->mean[i], s = e->std[i];
+    const double s = e->std[i];
     const int held = !(e->mask & (1u << i));
-    if (!isfinite(m) || m < 0.0 || (i == 3 && m <= 0.0) || m > ND_THETA_MAX) {
-      snprintf(err, errlen, "mean[%d] (%s) = %g: not a valid value", i, names[i], m);
-      return -1;
-    }
     if (!isfinite(s) || s < 0.0 || (held && s != 0.0)) {
       snprintf(err, errlen, "std[%d] (%s) = %g: must be finite and >= 0, and 0 when held", i,
-               names[i], s);
+               nd_theta_name[i], s);
       return -1;
     }
   }

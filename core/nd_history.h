@@ -13,7 +13,7 @@
  *       16     8  i64 utime, when the refit ended, microseconds since the epoch (> 0)
  *       24     8  i64 buffer_created: creation time in the replay buffer's file header
  *                     (tells one buffer from another; >= 0)
- *       32    32  f64 mean[4]: finite, frictions >= 0, mass > 0, all <= 1e4
+ *       32    32  f64 mean[4]: a valid theta (nd_theta_check)
  *       64    32  f64 std[4]: finite, >= 0; 0 for a held parameter
  *       96     8  f64 loss: L(mean) on the buffer, finite, >= 0
  *      104     8  f64 fit_time, s, finite, >= 0
@@ -29,11 +29,10 @@
 #include <stdint.h>
 
 #include "nd_rfile.h"
+#include "nd_theta.h"
 
 #define ND_HISTORY_ENC_VERSION 1
 #define ND_HISTORY_ENC_SIZE 120
-#define ND_NTHETA 4
-#define ND_THETA_MAX 1e4   /* as ndp_check_params */
 
 typedef struct {
   int64_t version;

@@ -85,3 +85,16 @@ int nd_parse_list(const char *s, const char *what, int n, double lo, double hi, 
   }
   return 0;
 }
+
+int nd_parse_box(const char *s, const char *what, double lim, nd_box *box, char *err,
+                 int errlen) {
+  double b[4];
+  if (nd_parse_list(s, what, 4, -lim, lim, b, err, errlen)) return -1;
+  if (!(b[0] < b[2]) || !(b[1] < b[3])) {
+    snprintf(err, errlen, "%s: '%s' is not a box XLO,YLO,XHI,YHI with XLO < XHI and "
+             "YLO < YHI", what, s);
+    return -1;
+  }
+  box->lo[0] = b[0], box->lo[1] = b[1], box->hi[0] = b[2], box->hi[1] = b[3];
+  return 0;
+}

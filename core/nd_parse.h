@@ -18,6 +18,16 @@ int nd_parse_int(const char *s, const char *what, long lo, long hi, int *out, ch
 int nd_parse_list(const char *s, const char *what, int n, double lo, double hi, double *out,
                   char *err, int errlen);
 
+/* An axis-aligned box in the table plane, m. */
+typedef struct {
+  double lo[2], hi[2];
+} nd_box;
+
+/* Parse "XLO,YLO,XHI,YHI": four finite numbers within [-lim, lim] with XLO < XHI and
+ * YLO < YHI. Return 0, or -1 with a message naming what. */
+int nd_parse_box(const char *s, const char *what, double lim, nd_box *box, char *err,
+                 int errlen);
+
 /* Parse an unsigned 64-bit decimal integer. Return 0, or -1 with a message. */
 int nd_parse_u64(const char *s, const char *what, uint64_t *out, char *err, int errlen);
 

@@ -5,14 +5,12 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/mman.h>
 #include <sys/select.h>
 #include <time.h>
 #include <unistd.h>
 
 #include <mujoco/mujoco.h>
 
-#include "nd_parse.h"
 #include "ndp_validate.h"
 #include "nudge/nudge_status_t.h"
 
@@ -103,12 +101,7 @@ int ndp_status_tick(lcm_t *lcm, ndp_status *st, int force) {
   m.received = st->received;
   m.published = st->published + 1;  /* counts this heartbeat */
   m.rejected = st->rejected;
-  if (st->jitter) {
-    m.period_p50_us = (int32_t)nd_jitter_quantile(st->jitter, 0.5);
-    m.period_p99_us = (int32_t)nd_jitter_quantile(st->jitter, 0.99);
-    m.period_max_us = (int32_t)st->jitter->max_us;
-    m.overruns = st->jitter->overruns;
-  } else if (st->loop) {
+  if (st->loop) {
     m.period_p50_us = st->loop->p50_us;
     m.period_p99_us = st->loop->p99_us;
     m.period_max_us = st->loop->max_us;
@@ -143,27 +136,6 @@ int ndp_default_threads(void) {
   return t < 1 ? 1 : (int)t;
 }
 
-/* GCC says __SANITIZE_ADDRESS__, clang __has_feature(address_sanitizer). */
-#if defined(__SANITIZE_ADDRESS__)
-#define NDP_ASAN 1
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define NDP_ASAN 1
-#endif
-#endif
-
-int ndp_lock_memory(char *err, int errlen) {
-#ifdef NDP_ASAN
-  (void)err;
-  (void)errlen;
-  return 1;
-#else
-  if (mlockall(MCL_CURRENT | MCL_FUTURE) == 0) return 0;
-  snprintf(err, errlen, "mlockall refused (%s)", strerror(errno));
-  return -1;
-#endif
-}
-
 void ndp_drain(lcm_t *lcm) {
   while (lcm_handle_timeout(lcm, 0) > 0) {
   }
@@ -178,15 +150,21 @@ int ndp_handle(lcm_t *lcm, double timeout_s) {
   return 0;
 }
 
-int ndp_parse_workspace(const char *s, const char *what, double lo[2], double hi[2],
-                        char *err, int errlen) {
-  double b[4];
-  if (nd_parse_list(s, what, 4, -NDP_MAX_POS, NDP_MAX_POS, b, err, errlen)) return -1;
-  if (!(b[0] < b[2]) || !(b[1] < b[3])) {
-    snprintf(err, errlen, "%s: '%s' is not a box XLO,YLO,XHI,YHI with XLO < XHI and "
-             "YLO < YHI", what, s);
-    return -1;
-  }
-  lo[0] = b[0], lo[1] = b[1], hi[0] = b[2], hi[1] = b[3];
-  return 0;
+
+void ndp_input_got(ndp_input *in, int64_t utime) {
+  in->have = 1;
+  in->t = ndp_sent_mono(utime);
+  in->batch++;
+  in->behind = 0;
+}
+
+int ndp_input_drained(ndp_input *in) {
+  const int full = in->batch >= in->cap;
+  if (full) in->behind = 1;
+  in->batch = 0;
+  return full;
+}
+
+int ndp_input_fresh(const ndp_input *in, double now, double timeout) {
+  return in->have && !in->behind && now - in->t <= timeout;
 }

@@ -8,9 +8,9 @@
 #include <stdint.h>
 #include <string.h>
 
-#include "nd_jitter.h"
+#include "nd_rtloop.h"
 
-/* Channels (DESIGN.md sec. 3). */
+/* Channels (doc/design.md lists who publishes and who subscribes). */
 #define NDP_CH_MOCAP "MOCAP"
 #define NDP_CH_ROBOT_STATE "ROBOT_STATE"
 #define NDP_CH_EE_CMD "EE_CMD"
@@ -56,23 +56,14 @@ double ndp_sent_mono(int64_t utime);
  * callers detect instabilities through mjData's warning counters. */
 void ndp_mujoco_handlers(const char *prog);
 
-/* Loop statistics as a real-time thread hands them to the heartbeat: the histogram stays
- * with the thread that writes it (reading it from another thread would race), this small
- * copy travels through a mailbox. */
-typedef struct {
-  int32_t p50_us, p99_us, max_us;
-  int64_t overruns;
-} ndp_loop_stats;
-
 /* The heartbeat every process publishes on STATUS. Counters are plain fields owned by
- * the process's main thread; loop statistics come from an optional nd_jitter the main
- * thread owns, or else from an optional ndp_loop_stats copy. */
+ * the process's main thread; a real-time process points loop at the newest statistics
+ * its loop posted (nd_rtloop_stats_take). */
 typedef struct {
   const char *name;
   int64_t received, published, rejected;
   const char *state;   /* short word: "running", "holding", ... */
-  const nd_jitter *jitter;
-  const ndp_loop_stats *loop;  /* used when jitter is NULL */
+  const nd_rtloop_stats *loop;  /* NULL: not a real-time process */
   double t0;           /* ndp_mono() at start */
   double next;         /* next publication time */
 } ndp_status;
@@ -127,18 +118,25 @@ int ndp_decode_why(int status, int size, const char *type, char *why, int len);
  * cores - 2 above, at least 1. */
 int ndp_default_threads(void);
 
-/* Lock every current and future page into RAM (mlockall), so a 1 kHz loop never waits
- * on a page fault. Return 0 when locked; 1 when skipped because this is an
- * AddressSanitizer build (its runtime turns mlockall into a no-op that reports success,
- * and locking its shadow memory, terabytes of reserved address space, could not work);
- * -1 when the kernel refused, with a message. Either way the caller can go on. */
-int ndp_lock_memory(char *err, int errlen);
+/* Freshness of one periodic input stream. LCM drops the newest message when a
+ * subscription's queue is full, so a drain that emptied a full queue ended on an old
+ * message, however fresh its handling: the stream is behind until its next message. */
+typedef struct {
+  int have;       /* a valid message has arrived */
+  double t;       /* ndp_mono() when the newest was sent (ndp_sent_mono) */
+  int cap;        /* queue capacity of its subscription */
+  int batch;      /* messages handled in the current drain */
+  int behind;     /* the last drain filled the queue: newer messages may have been dropped */
+} ndp_input;
 
-/* Parse a workspace box "XLO,YLO,XHI,YHI" (m) given to option what: four finite numbers
- * within NDP_MAX_POS with lo < hi on each axis. Return 0 with lo[2], hi[2] set, or -1
- * with a message naming the option. */
-int ndp_parse_workspace(const char *s, const char *what, double lo[2], double hi[2],
-                        char *err, int errlen);
+/* A valid message stamped utime arrived on the stream. */
+void ndp_input_got(ndp_input *in, int64_t utime);
+
+/* After a drain: return 1 if it filled the queue (the stream is then behind). */
+int ndp_input_drained(ndp_input *in);
+
+/* Heard from within timeout of now (ndp_mono), and not behind. */
+int ndp_input_fresh(const ndp_input *in, double now, double timeout);
 
 /* Drain every queued message without blocking (LCM's queues drop the newest when full). */
 void ndp_drain(lcm_t *lcm);

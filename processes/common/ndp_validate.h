@@ -13,6 +13,10 @@
 #include "nudge/nudge_robot_state_t.h"
 #include "nudge/nudge_status_t.h"
 #include "nudge/nudge_task_t.h"
+#include "nd_snap.h"
+
+_Static_assert(ND_MAX_KEYS == NUDGE_PLAN_T_MAX_KEYPOINTS,
+               "plan_t carries as many keypoints as the planner and executor handle");
 
 /* Bounds shared by the checks: the workspace is a few metres at most, nothing a pushing
  * robot does exceeds these by orders of magnitude. */

@@ -18,7 +18,6 @@ void exec_loop_init(exec_loop *s, const nd_exec_cfg *cfg, double timeout,
   s->cfg = *cfg;
   s->timeout = timeout;
   s->io = io;
-  nd_jitter_reset(&s->jit);
   s->rep.mode = -1;
   s->rep.plan_id = -1;
   s->rep.refused_id = -1;
@@ -29,9 +28,6 @@ void exec_loop_init(exec_loop *s, const nd_exec_cfg *cfg, double timeout,
 void exec_loop_report_post(exec_loop *s, double now, int force) {
   if (!force && now < s->next_report) return;
   s->next_report = now + EXEC_LOOP_REPORT_PERIOD;
-  s->rep.loop.p50_us = (int32_t)nd_jitter_quantile(&s->jit, 0.5);
-  s->rep.loop.p99_us = (int32_t)nd_jitter_quantile(&s->jit, 0.99);
-  s->rep.loop.max_us = (int32_t)s->jit.max_us;
   nd_mailbox_post(&s->io->report, &s->rep, (int)sizeof(s->rep));
 }
 

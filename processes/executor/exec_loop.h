@@ -17,7 +17,6 @@
 #include <stdint.h>
 
 #include "nd_exec.h"
-#include "nd_jitter.h"
 #include "nd_rtio.h"
 #include "ndp.h"
 
@@ -60,8 +59,6 @@ typedef struct {
   char refused_why[160];    /* nd_exec's reason for it */
   int64_t plan_id;          /* plan being followed, -1 before the first */
   int64_t plan_utime;       /* its utime, 0 before the first */
-  int64_t missed;           /* deadlines skipped after overruns */
-  ndp_loop_stats loop;      /* period error (us) and overruns */
 } exec_loop_report;
 
 _Static_assert(sizeof(exec_loop_state_in) <= ND_RTIO_MAX &&
@@ -93,9 +90,8 @@ typedef struct {
   double t_plan;                /* send time of the newest accepted plan */
   nd_exec ex;
   int64_t seq;
-  nd_jitter jit;                /* wake-up errors, added by the caller's clock loop */
   double next_report;
-  exec_loop_report rep;      /* the caller adds missed deadlines and overruns */
+  exec_loop_report rep;
 } exec_loop;
 
 /* Empty mailboxes and ring. */

@@ -10,27 +10,17 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "nd_parse.h"
+#include "nd_opt.h"
+#include "nd_stats.h"
 #include "nd_snap.h"
 #include "nds_fit.h"
 #include "nds_planner.h"
+#include "nds_setup.h"
 
 static double now_s(void) {
   struct timespec ts;
   clock_gettime(CLOCK_MONOTONIC, &ts);
   return ts.tv_sec + 1e-9 * ts.tv_nsec;
-}
-
-static int cmp_double(const void *a, const void *b) {
-  double x = *(const double *)a, y = *(const double *)b;
-  return (x > y) - (x < y);
-}
-
-/* q-quantile (0..1) of n values, sorting them in place. */
-static double quantile(double *v, int n, double q) {
-  qsort(v, n, sizeof(double), cmp_double);
-  int i = (int)floor(q * (n - 1) + 0.5);
-  return v[i];
 }
 
 /* The start of a push: object at the origin, sphere 8 cm behind it, setpoint at the sphere. */
@@ -102,46 +92,31 @@ int main(int argc, char **argv) {
   char err[512];
   int reps = 30;
   double plan_dt = 0.005, robust = NDS_FIT_ROBUST_SCALE;
-  for (int i = 1; i < argc; i++) {
-    if (!strcmp(argv[i], "-h") || !strcmp(argv[i], "--help")) {
-      printf("usage: nudge-bench [--reps N] [--plan-dt S] [--robust S]\n"
-             "Measures raw mj_step rate, batched rollout efficiency on 1 and 2 workers,\n"
-             "plan latency at the paper's settings, the planning model's prediction error\n"
-             "and the adapter's refit time.\n"
-             "  --reps N      plans per latency figure (default 30)\n"
-             "  --plan-dt S   planning model timestep (default 0.005)\n"
-             "  --robust S    scale of the robust score timed as refit_s_10x5s_robust, m^2,\n"
-             "                (0, 1] (default 1e-9)\n");
-      return 0;
-    }
-    int rc = -1;
-    if (i + 1 < argc && !strcmp(argv[i], "--reps"))
-      rc = nd_parse_int(argv[++i], "--reps", 3, 10000, &reps, err, sizeof(err));
-    else if (i + 1 < argc && !strcmp(argv[i], "--plan-dt"))
-      rc = nd_parse_double(argv[++i], "--plan-dt", 1e-4, 0.02, &plan_dt, err, sizeof(err));
-    else if (i + 1 < argc && !strcmp(argv[i], "--robust")) {
-      rc = nd_parse_double(argv[++i], "--robust", 0, 1, &robust, err, sizeof(err));
-      if (!rc && !(robust > 0)) {
-        snprintf(err, sizeof(err), "--robust must be > 0 (0 would time L again)");
-        rc = -1;
-      }
-    }
-    else
-      snprintf(err, sizeof(err), "unknown option or missing value: %s", argv[i]);
-    if (rc) {
-      fprintf(stderr, "nudge-bench: %s\n", err);
-      return 2;
-    }
-  }
+  nd_opt opts[] = {
+      {"reps", ND_OPT_INT, &reps, 3, 10000, .help = "plans per latency figure"},
+      {"plan-dt", ND_OPT_DOUBLE, &plan_dt, 1e-4, 0.02, .arg = "S",
+       .help = "planning model timestep, s"},
+      {"robust", ND_OPT_DOUBLE, &robust, 1e-12, 1, .arg = "S",
+       .help = "scale of the robust score timed as refit_s_10x5s_robust, m^2"},
+  };
+  nd_opt_spec spec = {"nudge-bench", "[options]",
+                      "Measures the raw mj_step rate, batched rollout efficiency on 1 and 2 "
+                      "workers, plan latency at the paper's settings, the planning model's "
+                      "prediction error and the adapter's refit time. Prints a report, then "
+                      "one `name value unit` line per figure. Not a test: nothing here "
+                      "asserts.",
+                      NULL, opts, sizeof(opts) / sizeof(opts[0])};
+  const int prc = nd_opt_parse(&spec, argc, argv);
+  if (prc != ND_OPT_RUN) return prc;
 
-  nds_scene_cfg pc;
-  nds_scene_cfg_default(&pc);
-  pc.timestep = plan_dt;
-  nds_model nm = {0};
-  if (nds_model_init(&nm, &pc, err, sizeof(err))) {
+  const int ncores = nds_setup_cores(256);
+  nds_setup su;
+  if (nds_setup_init(&su, plan_dt, ncores, err, sizeof(err))) {
     fprintf(stderr, "nudge-bench: %s\n", err);
     return 1;
   }
+  nds_model nm = su.plan;
+  const nds_scene_cfg pc = nm.cfg;
   nds_ctrl_cfg ctrl;
   nds_ctrl_cfg_default(&ctrl);
   nds_state s0;
@@ -150,7 +125,6 @@ int main(int argc, char **argv) {
   const int M = 2;
   const double T = 0.3;
   const int nsteps = (int)lround(M * T / plan_dt);
-  int ncores = (int)sysconf(_SC_NPROCESSORS_ONLN);
   printf("nudge-bench: plan model dt %.4f s (%d steps per 0.6 s rollout), condim %d, %d cores\n",
          plan_dt, nsteps, pc.condim, ncores);
 
@@ -199,7 +173,7 @@ int main(int argc, char **argv) {
   const int settings[2][2] = {{128, 4}, {50, 2}};
   double med[2], p90[2];
   double *lat = malloc(sizeof(double) * reps);
-  nd_pool *pool = nd_pool_create(ncores < 1 ? 1 : ncores, err, sizeof(err));
+  nd_pool *pool = su.pool;
   for (int k = 0; k < 2; k++) {
     nds_planner_cfg cfg;
     nds_planner_cfg_default(&cfg);
@@ -217,24 +191,18 @@ int main(int argc, char **argv) {
       nds_planner_plan(p, &s0, sp0, &goal, &plan, err, sizeof(err));
       lat[r] = 1e3 * (now_s() - t);
     }
-    med[k] = quantile(lat, reps, 0.5);
-    p90[k] = quantile(lat, reps, 0.9);
+    med[k] = nd_quantile(lat, reps, 0.5);
+    p90[k] = nd_quantile(lat, reps, 0.9);
     printf("plan N %3d C %d, H 0.6 s, M 2, %d workers: median %.1f ms, p90 %.1f ms (%d rollouts)\n",
            cfg.pop, cfg.iters, nd_pool_size(pool), med[k], p90[k], plan.evals);
     nds_planner_free(p);
   }
-  nd_pool_free(pool);
 
   /* 4. What the coarse planning step costs: the same pushes in the planning model and in
    * the 1 ms world, final object position after the 0.6 s horizon, for several steps. */
-  nds_scene_cfg wc = pc;
-  wc.timestep = 0.001;
-  nds_model world = {0};
-  if (nds_model_init(&world, &wc, err, sizeof(err))) {
-    fprintf(stderr, "nudge-bench: %s\n", err);
-    return 1;
-  }
-  mjData *dw = mj_makeData(world.m);
+  const nds_model world = su.world;
+  const nds_scene_cfg wc = world.cfg;
+  mjData *dw = su.d;
   nds_rollout_out *ref = malloc(sizeof(*ref) * nbatch);
   double *perr = malloc(sizeof(double) * nbatch);
   double moved = 0.0;
@@ -263,7 +231,7 @@ int main(int argc, char **argv) {
       perr[i] = hypot(o.obj_xy[0] - ref[i].obj_xy[0], o.obj_xy[1] - ref[i].obj_xy[1]);
     }
     double ms = 1e3 * (now_s() - t0) / nbatch;
-    double med_k = quantile(perr, nbatch, 0.5);
+    double med_k = nd_quantile(perr, nbatch, 0.5);
     printf("  dt %.3f s: %.3f ms per rollout, object position error median %.4f m, max %.4f m\n",
            dts[k], ms, med_k, perr[nbatch - 1]);
     if (dts[k] == plan_dt) pe_med = med_k;
@@ -351,8 +319,7 @@ int main(int argc, char **argv) {
       nds_model_free(&fm);
     }
   }
-  qsort(rep_s, REFIT_REPS, sizeof(double), cmp_double);
-  refit_s[0] = rep_s[REFIT_REPS / 2];
+  refit_s[0] = nd_quantile(rep_s, REFIT_REPS, 0.5);  /* sorts rep_s */
   printf("refit in the adapter's configuration, %d times: median %.2f s (%.2f..%.2f)\n",
          REFIT_REPS, refit_s[0], rep_s[0], rep_s[REFIT_REPS - 1]);
   nd_pool_free(fpool);
@@ -378,9 +345,7 @@ int main(int argc, char **argv) {
   free(lat);
   free(keys);
   free(outs);
-  mj_deleteData(dw);
   mj_deleteData(d);
-  nds_model_free(&world);
-  nds_model_free(&nm);
+  nds_setup_free(&su);
   return 0;
 }

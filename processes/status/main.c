@@ -5,7 +5,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "nd_parse.h"
+#include "nd_opt.h"
 #include "ndp.h"
 #include "ndp_validate.h"
 
@@ -75,65 +75,29 @@ static void on_status(const lcm_recv_buf_t *rbuf, const char *ch, void *user) {
   nudge_status_t_decode_cleanup(&msg);
 }
 
-static void usage(FILE *f) {
-  fprintf(f,
-          "usage: " PROG " [options]\n"
-          "Print every heartbeat on STATUS as one line: name pid state counters period stats.\n\n"
-          "  --wait NAME      print nothing; exit 0 as soon as a heartbeat of NAME arrives,\n"
-          "                   1 if none within --timeout (default 10 s)\n"
-          "  --pid PID        with --wait: the heartbeat must come from this pid\n"
-          "  --timeout S      stop after S s (print mode: exit 0; default: until SIGINT)\n"
-          "  --count N        print mode: exit after N heartbeats\n"
-          "  --lcm-url URL    default $LCM_DEFAULT_URL, else " NDP_DEFAULT_URL "\n"
-          "  -h, --help       this text\n");
-}
-
 int main(int argc, char **argv) {
   char err[512];
   status_cfg c = {NULL, 0, -1.0, 0, NULL};
-  for (int i = 1; i < argc; i++) {
-    const char *a = argv[i];
-    if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
-      usage(stdout);
-      return 0;
-    }
-    int rc = 0;
-    if (strcmp(a, "--wait") && strcmp(a, "--pid") && strcmp(a, "--timeout") &&
-        strcmp(a, "--count") && strcmp(a, "--lcm-url")) {
-      snprintf(err, sizeof(err), "unknown argument: %s", a);
-      rc = -1;
-    } else if (i + 1 >= argc) {
-      snprintf(err, sizeof(err), "%s needs a value", a);
-      rc = -1;
-    } else {
-      const char *v = argv[++i];
-      if (!strcmp(a, "--wait")) {
-        c.wait_name = v;
-        if (!*v) {
-          snprintf(err, sizeof(err), "--wait: empty name");
-          rc = -1;
-        }
-      } else if (!strcmp(a, "--pid")) {
-        rc = nd_parse_int(v, "--pid", 1, 0x7fffffff, &c.pid, err, sizeof(err));
-      } else if (!strcmp(a, "--timeout")) {
-        rc = nd_parse_double(v, "--timeout", 0.0, 1e6, &c.timeout, err, sizeof(err));
-      } else if (!strcmp(a, "--count")) {
-        rc = nd_parse_int(v, "--count", 1, 0x7fffffff, &c.count, err, sizeof(err));
-      } else {
-        c.url = v;
-      }
-    }
-    if (rc) {
-      fprintf(stderr, PROG ": %s\n", err);
-      usage(stderr);
-      return 2;
-    }
-  }
-  if (c.pid && !c.wait_name) {
-    fprintf(stderr, PROG ": --pid needs --wait NAME\n");
-    usage(stderr);
-    return 2;
-  }
+  nd_opt opts[] = {
+      {"wait", ND_OPT_STRING, &c.wait_name, .arg = "NAME",
+       .help = "print nothing; exit 0 as soon as a heartbeat of NAME arrives, 1 if none "
+               "within --timeout"},
+      {"pid", ND_OPT_INT, &c.pid, 1, 0x7fffffff, .arg = "PID", .def = "",
+       .help = "with --wait: the heartbeat must come from this pid"},
+      {"timeout", ND_OPT_DOUBLE, &c.timeout, 0.0, 1e6, .arg = "S",
+       .def = "10 with --wait, else until SIGINT", .help = "stop after S s (print mode: exit 0)"},
+      {"count", ND_OPT_INT, &c.count, 1, 0x7fffffff, .def = "",
+       .help = "print mode: exit after N heartbeats"},
+      {"lcm-url", ND_OPT_STRING, &c.url, .arg = "URL", .def = "$LCM_DEFAULT_URL, else " NDP_DEFAULT_URL,
+       .help = "LCM URL"},
+  };
+  nd_opt_spec spec = {PROG, "[options]",
+                      "Print every heartbeat on STATUS as one line: name pid state counters "
+                      "period stats.",
+                      NULL, opts, sizeof(opts) / sizeof(opts[0])};
+  const int rc = nd_opt_parse(&spec, argc, argv);
+  if (rc != ND_OPT_RUN) return rc;
+  if (c.pid && !c.wait_name) return nd_opt_fail(&spec, "--pid needs --wait NAME");
   if (c.wait_name && c.timeout < 0.0) c.timeout = 10.0;
 
   ndp_signals();

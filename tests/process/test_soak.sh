@@ -240,7 +240,7 @@ pt_check "records were committed during the soak (${committed:-0})" test "${comm
 # stalled and lost its input, ...); a runner that could not record the first task after
 # its start was a bug the soak found.
 not_rec=$(cat "$PT_WORK"/tasks-*.err | grep -c '^nudge-tasks: task [0-9]* not recorded: ')
-no_start=$(cat "$PT_WORK"/tasks-*.err | grep -c 'not recorded: no ROBOT_STATE received before')
+no_start=$(cat "$PT_WORK"/tasks-*.err | grep -c 'not recorded: no robot state received before')
 pt_figure tasks_not_recorded "$not_rec" count
 pt_check "every runner had a start state for its first task ($no_start without)" test "$no_start" -eq 0
 

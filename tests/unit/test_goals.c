@@ -150,7 +150,9 @@ static void test_command_line_goal(void **state) {
   for (size_t i = 0; i < sizeof(bad) / sizeof(bad[0]); i++) {
     if (nd_goal_parse_arg(bad[i], &g, err, sizeof(err)) != -1)
       fail_msg("'%s' was accepted", bad[i]);
-    assert_non_null(strstr(err, "--goal"));
+    char quoted[64];
+    snprintf(quoted, sizeof(quoted), "'%s'", bad[i]);
+    assert_non_null(strstr(err, quoted));
   }
 }
 

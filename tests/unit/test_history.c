@@ -72,11 +72,11 @@ static void check_refuses(void **state) {
   e = sample(1);
   e.mean[0] = NAN;
   assert_int_equal(nd_history_check(&e, err, sizeof(err)), -1);
-  assert_non_null(strstr(err, "mean[0]"));
+  assert_non_null(strstr(err, "mean: theta[0]"));
   e = sample(1);
   e.mean[3] = 0.0; /* a massless sphere */
   assert_int_equal(nd_history_check(&e, err, sizeof(err)), -1);
-  assert_non_null(strstr(err, "mean[3]"));
+  assert_non_null(strstr(err, "mean: theta[3]"));
   e = sample(1);
   e.mean[1] = -1e-9;
   assert_int_equal(nd_history_check(&e, err, sizeof(err)), -1);
@@ -137,7 +137,7 @@ static void decode_refuses(void **state) {
   memcpy(buf, good, sizeof(good));
   poke_f64(buf, 40, NAN); /* mean[1] */
   assert_int_equal(nd_history_decode(&d, buf, sizeof(good), err, sizeof(err)), -1);
-  assert_non_null(strstr(err, "mean[1]"));
+  assert_non_null(strstr(err, "mean: theta[1]"));
 
   memcpy(buf, good, sizeof(good));
   buf[115] = 0x80; /* buffer_size negative */

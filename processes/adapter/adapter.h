@@ -1,0 +1,117 @@
+/* adapter: what the files of nudge-adapter share.
+ *
+ *   main.c    options and wiring: the model, the fit, the history, the loop
+ *   watch.c   the replay buffer: reading what was appended, skipping bad records
+ *   fitter.c  the fit thread: one nds_fit_run per job
+ *   params.c  a finished fit: the next version, the history, PARAMS
+ *
+ * The adapter watches the replay buffer the task runner appends to. Whenever complete
+ * rollouts beyond those of the last fit are there, it refits theta on all of them
+ * (sim/nds_fit.h), publishes the result on PARAMS, appends it to the parameter history
+ * (core/nd_history.h) and republishes it at 1 Hz, so a planner started later gets it too.
+ * A refit takes seconds, so it runs in the fit thread; the main thread does not touch the
+ * rollout array while a job runs (new records wait in the file, so one refit covers
+ * whatever arrived during the last one). A restarted adapter reads its history: version
+ * numbering and the CEM distribution go on from its last entry. */
+#ifndef ADAPTER_H
+#define ADAPTER_H
+
+#include <pthread.h>
+#include <sys/types.h>
+
+#include "nd_history.h"
+#include "nd_rbuf.h"
+#include "nds_fit.h"
+#include "ndp.h"
+
+#define PROG "nudge-adapter"
+
+typedef struct {
+  const char *url;
+  const char *buffer;
+  char history[ND_RFILE_PATH_MAX];
+  unsigned fit;               /* bit i: theta[i] fitted */
+  double theta[ND_NTHETA];    /* prior mean; value of held parameters */
+  double ref[ND_NTHETA];      /* nominal theta the prior std is sized from */
+  double D;                   /* prior uncertainty of the paper's formula */
+  int threads;
+  uint64_t seed;
+  int nice;
+  double replay_dt;           /* model timestep of the replays, s */
+  int replay_mode;            /* NDS_REPLAY_* */
+  double replay_window;       /* s */
+  double robust;              /* m^2: CEM ranks by the robust score; 0: by L (nds_fit.h) */
+} adapter_opts;
+
+/* The fit thread's job and result. Fields under mu. */
+enum { FIT_IDLE = 0, FIT_QUEUED, FIT_RUNNING, FIT_DONE };
+
+typedef struct {
+  pthread_t th;
+  pthread_mutex_t mu;
+  pthread_cond_t cv;
+  int started;
+  int state;              /* FIT_*: main moves IDLE->QUEUED and DONE->IDLE, the thread the rest */
+  int quit;
+  nds_fit *fit;
+  const nd_rollout *rs;   /* the job: rs[0, n), untouched by main while not IDLE */
+  int n;
+  int rc;                 /* result */
+  nds_fit_out out;
+  double secs;
+  char err[256];
+} adapter_fitter;
+
+/* The process's state, owned by the main thread. */
+typedef struct {
+  const adapter_opts *o;
+  lcm_t *lcm;
+  ndp_status st;
+  nds_model model;            /* the replays' model, for checking records before a fit */
+
+  /* buffer */
+  nd_rfile_reader rd;
+  int rd_open;
+  int64_t resume;             /* offset to reopen at after an I/O error; 0: from the start */
+  dev_t dev;
+  ino_t ino;
+  int64_t buffer_created;     /* header creation time of the open buffer */
+  char open_err[256];         /* last reason the buffer could not be opened (said once) */
+  int64_t stop_offset;        /* where the valid records stop, as last reported; -1 none */
+  int64_t torn_offset;        /* torn tail seen here since torn_t; -1 none */
+  double torn_t;
+  nd_rollout *rs;             /* good records, file order */
+  int n, cap;
+  int64_t bad_logged;
+
+  /* fits */
+  int covered;                /* records the latest fit (or the history's) used; 0 none */
+  int failed_n;               /* a fit of this many records failed: wait for more */
+  int64_t version;            /* latest version; 0: none yet */
+  int have_latest;
+  nd_history_entry latest;
+  nd_rfile_writer hist;
+  double next_params;
+} adapter;
+
+/* watch.c */
+void adapter_poll(adapter *a);            /* read what was appended (no fit running) */
+void adapter_close(adapter *a);           /* close the buffer, drop its records */
+
+/* fitter.c */
+int adapter_fitter_start(adapter_fitter *ft, char *err, int errlen);
+int adapter_fitter_state(adapter_fitter *ft);
+void adapter_fitter_submit(adapter_fitter *ft, const nd_rollout *rs, int n);
+void adapter_fitter_stop(adapter_fitter *ft);
+
+/* params.c */
+int adapter_open_history(adapter *a, nd_history_summary *hs, char *err, int errlen);
+void adapter_banner(const adapter *a, const nds_fit *fit, const nds_fit_cfg *fc,
+                    const nd_history_summary *hs);
+int adapter_publish(adapter *a);          /* PARAMS of the latest fit; -1 on failure */
+void adapter_collect(adapter *a, adapter_fitter *ft);  /* take a finished fit */
+int adapter_resume(adapter *a, nds_fit *fit, const double sigma0[ND_NTHETA],
+                   const nd_history_summary *hs, char *err, int errlen);
+void adapter_quit_during_fit(adapter *a);
+
+#endif

@@ -1,0 +1,106 @@
+/* bridge_io: the bridge's inputs, outputs and reports (bridge_io.h). */
+#include "bridge_io.h"
+
+#include <stdio.h>
+#include <string.h>
+
+#include "nd_exec.h"
+#include "ndp_validate.h"
+
+#define PROG "nudge-bridge"
+
+_Static_assert(BRIDGE_WS_MARGIN >= ND_EXEC_WS_MARGIN,
+               "the bridge must accept every setpoint the executor may send");
+
+static void on_ee_cmd(const lcm_recv_buf_t *rbuf, const char *channel,
+                      const nudge_ee_cmd_t *msg, void *user) {
+  (void)rbuf;
+  (void)channel;
+  bridge_io *io = user;
+  io->st.received++;
+  char why[256];
+  if (ndp_check_ee_cmd(msg, why, sizeof(why))) {
+    io->st.rejected++;
+    ndp_refused(&io->refused, PROG, "EE_CMD", why);
+    return;
+  }
+  /* Tracking a command that the executor would never send moves the robot where nothing
+   * checked it may go: refused like an invalid one, so the newest valid command goes on
+   * being tracked until it is stale, and then the robot holds. */
+  for (int k = 0; k < 2; k++) {
+    if (msg->p[k] >= io->ws.lo[k] - BRIDGE_WS_MARGIN && msg->p[k] <= io->ws.hi[k] + BRIDGE_WS_MARGIN)
+      continue;
+    snprintf(why, sizeof(why), "p (%.3f, %.3f) is outside the workspace x [%.3f, %.3f], "
+             "y [%.3f, %.3f] m plus its %.2f m margin", msg->p[0], msg->p[1], io->ws.lo[0],
+             io->ws.hi[0], io->ws.lo[1], io->ws.hi[1], BRIDGE_WS_MARGIN);
+    io->st.rejected++;
+    ndp_refused(&io->refused_ws, PROG, "EE_CMD", why);
+    return;
+  }
+  bridge_cmd c;
+  for (int k = 0; k < 2; k++) {
+    c.p[k] = msg->p[k];
+    c.v[k] = msg->v[k];
+    c.a[k] = msg->a[k];
+  }
+  c.arrival = ndp_mono();
+  c.seq = msg->seq;
+  nd_mailbox_post(&io->b->cmd, &c, sizeof(c));
+}
+
+/* Bytes on EE_CMD that are not one nudge_ee_cmd_t. */
+static void undecodable(void *user, const char *ch, const char *why) {
+  bridge_io *io = user;
+  io->st.received++;
+  io->st.rejected++;
+  ndp_refused(&io->refused, PROG, ch, why);
+}
+
+NDP_TYPED_HANDLER(nudge_ee_cmd_t, on_ee_cmd_raw, on_ee_cmd, undecodable)
+
+int bridge_io_subscribe(bridge_io *io, lcm_t *lcm, char *err, int errlen) {
+  if (!lcm_subscribe(lcm, NDP_CH_EE_CMD, on_ee_cmd_raw, io)) {
+    snprintf(err, errlen, "cannot subscribe to %s", NDP_CH_EE_CMD);
+    return -1;
+  }
+  return 0;
+}
+
+int bridge_io_publish(bridge_io *io, lcm_t *lcm) {
+  int tag, n, failed = 0;
+  while ((n = nd_ring_pop(&io->b->out, &tag, io->buf, sizeof(io->buf))) >= 0) {
+    const char *ch = tag == BRIDGE_TAG_MOCAP ? NDP_CH_MOCAP : NDP_CH_ROBOT_STATE;
+    if (lcm_publish(lcm, ch, io->buf, (unsigned)n) == 0) io->st.published++;
+    else failed++;
+  }
+  return failed;
+}
+
+void bridge_io_report(bridge_io *io, uint64_t *version, const nd_rtloop_stats *loop) {
+  bridge_report *r = &io->rep;
+  if (nd_mailbox_take(&io->b->report, version, r, sizeof(*r)) != (int)sizeof(*r)) return;
+  if (r->holding != io->holding) {
+    if (r->holding)
+      fprintf(stderr, PROG ": %s: the robot holds at (%.4f, %.4f)\n",
+              r->have_cmd ? "EE_CMD went stale" : "no EE_CMD yet", r->hold_pos[0],
+              r->hold_pos[1]);
+    else
+      fprintf(stderr, PROG ": EE_CMD %s: tracking\n", io->had_cmd ? "back" : "arrived");
+    io->holding = r->holding;
+    io->had_cmd |= r->have_cmd;
+  }
+  const double now = ndp_mono();
+  if (r->resets > io->resets_said && now - io->reset_said_at >= 5.0) {
+    fprintf(stderr, PROG ": the world diverged (non-finite state): reset to the initial "
+            "state (%lld resets)\n", (long long)r->resets);
+    io->resets_said = r->resets;
+    io->reset_said_at = now;
+  }
+  if (loop->skipped > io->skipped_said && now - io->skip_said_at >= 5.0) {
+    fprintf(stderr, PROG ": the world loop stalled: %lld steps dropped so far\n",
+            (long long)loop->skipped);
+    io->skipped_said = loop->skipped;
+    io->skip_said_at = now;
+  }
+  io->st.state = r->holding ? "holding" : "emulating";
+}

@@ -1,0 +1,70 @@
+/* bridge_loop: one step of nudge-bridge's 1 kHz loop, without the clock.
+ *
+ * Take the newest EE_CMD from its mailbox; track it while fresh, else hold where the
+ * sphere was when commands went stale (or never came); step the world (sim/nds_world.h);
+ * encode ROBOT_STATE and the motion-capture frames the step released into the ring. A step
+ * never allocates, locks, prints or waits on I/O (tests/unit/test_rtloop.c counts it);
+ * what it has to say goes into the report mailbox.
+ *
+ * Threads: the I/O thread posts bridge_cmd into cmd, drains out and takes report; only the
+ * loop thread touches the bridge_loop itself. */
+#ifndef BRIDGE_LOOP_H
+#define BRIDGE_LOOP_H
+
+#include <stdint.h>
+
+#include "nd_rtio.h"
+#include "nd_rtloop.h"
+#include "nds_world.h"
+
+/* A validated EE_CMD as the loop needs it, stamped with its local arrival. */
+typedef struct {
+  double p[2], v[2], a[2];
+  double arrival;      /* monotonic s */
+  int64_t seq;
+} bridge_cmd;
+
+/* What the loop reports, every BRIDGE_LOOP_REPORT_STEPS steps and at every hold change.
+ * Counters only grow. */
+typedef struct {
+  int64_t steps, resets, hold_events;
+  int64_t robot_states, frames;
+  double hold_pos[2];  /* the setpoint while holding */
+  int32_t holding, have_cmd;
+} bridge_report;
+
+#define BRIDGE_LOOP_REPORT_STEPS 100
+
+enum { BRIDGE_TAG_ROBOT_STATE = 0, BRIDGE_TAG_MOCAP = 1 };
+
+typedef struct {
+  nds_world *world;
+  double cmd_timeout;  /* s: a command older than this is stale */
+  nd_mailbox cmd;      /* I/O -> loop */
+  nd_mailbox report;   /* loop -> I/O */
+  nd_ring out;         /* loop -> I/O: encoded ROBOT_STATE / MOCAP */
+  /* the loop thread's own */
+  bridge_cmd last;
+  uint64_t cmd_version;
+  int have_cmd, holding;
+  double hold[2];
+  int64_t rs_seq, mc_seq;
+  bridge_report rep;
+} bridge_loop;
+
+/* Set up the loop on world w (which it steps from now on). Also does what would otherwise
+ * happen lazily on the first step (lcm-gen's type hashes), so the steps that follow
+ * allocate nothing. */
+void bridge_loop_init(bridge_loop *b, nds_world *w, double cmd_timeout);
+
+/* One world step for monotonic time now (s), which is wall-clock time utime (us). */
+void bridge_loop_step(bridge_loop *b, double now, int64_t utime);
+
+/* bridge_loop_step for nd_rtloop (ctx: the bridge_loop): one step per deadline, at the
+ * deadline's time, so world time keeps up with real time. */
+void bridge_loop_tick(void *ctx, const nd_rtloop_tick *t);
+
+/* Post the report now. */
+void bridge_loop_report_post(bridge_loop *b);
+
+#endif

@@ -1,0 +1,32 @@
+/* exec_io: nudge-executor's I/O thread: LCM in (ROBOT_STATE, PLAN validated and posted to
+ * the loop's mailboxes), EE_CMD out (what the loop left in its ring), and what the loop
+ * reports turned into log lines and the heartbeat. */
+#ifndef EXEC_IO_H
+#define EXEC_IO_H
+
+#include "exec_loop.h"
+#include "ndp.h"
+
+typedef struct {
+  exec_loop_io *x;     /* the loop's mailboxes and ring */
+  double timeout;      /* s: the loop's input timeout, for log lines */
+  ndp_status st;
+  int backlog_max;     /* most setpoints found waiting in the ring at once */
+  ndp_ratelog log_state, log_plan, log_exec;  /* refused inputs; plans nd_exec refused */
+  ndp_ratelog log_box;                        /* of those: for the workspace */
+  ndp_ratelog log_old;                        /* plans made from a state too old */
+  exec_loop_report last;                      /* the report taken last */
+} exec_io;
+
+/* Subscribe ROBOT_STATE and PLAN for io on lcm. Return 0, or -1 with a message. */
+int exec_io_subscribe(exec_io *io, lcm_t *lcm, char *err, int errlen);
+
+/* Publish what the loop committed, oldest first. Return the number published, -1 on a
+ * publish error. */
+int exec_io_publish(exec_io *io, lcm_t *lcm);
+
+/* Take the loop's newest report, if any: log stale transitions and refused plans new
+ * since the last one, update the heartbeat's state and refusals. Return 1 if taken. */
+int exec_io_report(exec_io *io, uint64_t *version);
+
+#endif

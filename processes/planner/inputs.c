@@ -1,0 +1,221 @@
+/* inputs: nudge-planner's input channels (planner.h): each message validated, counted and
+ * kept as the newest of its kind; TASK, EPISODE and PARAMS change the task and theta. */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "nd_math.h"
+#include "planner.h"
+
+void planner_reject(planner_proc *p, const char *channel, const char *why) {
+  p->st.rejected++;
+  ndp_refused(&p->rejected, PROG, channel, why);
+}
+
+static void on_mocap(const lcm_recv_buf_t *rb, const char *ch, const nudge_mocap_t *m,
+                     void *user) {
+  (void)rb;
+  planner_proc *p = user;
+  char why[160];
+  p->st.received++;
+  if (ndp_check_mocap(m, why, sizeof(why))) {
+    planner_reject(p, ch, why);
+    return;
+  }
+  /* A frame not newer than the last (a restarted publisher, a stepped clock) restarts the
+   * estimate (nd_objest_add); otherwise a jump in seq counts the frames lost. */
+  if (p->in_mocap.have && m->utime > p->mocap.utime && m->seq > p->mocap.seq + 1)
+    p->mocap_lost += m->seq - p->mocap.seq - 1;
+  p->mocap = *m;
+  ndp_input_got(&p->in_mocap, m->utime);
+  nd_objest_add(&p->est, m->utime, m->obj_pos, m->obj_quat);
+}
+
+static void on_robot_state(const lcm_recv_buf_t *rb, const char *ch,
+                           const nudge_robot_state_t *m, void *user) {
+  (void)rb;
+  planner_proc *p = user;
+  char why[160];
+  p->st.received++;
+  if (ndp_check_robot_state(m, why, sizeof(why))) {
+    planner_reject(p, ch, why);
+    return;
+  }
+  p->rs = *m;
+  ndp_input_got(&p->in_rs, m->utime);
+}
+
+static void on_ee_cmd(const lcm_recv_buf_t *rb, const char *ch, const nudge_ee_cmd_t *m,
+                      void *user) {
+  (void)rb;
+  planner_proc *p = user;
+  char why[160];
+  p->st.received++;
+  if (ndp_check_ee_cmd(m, why, sizeof(why))) {
+    planner_reject(p, ch, why);
+    return;
+  }
+  p->cmd = *m;
+  ndp_input_got(&p->in_cmd, m->utime);
+}
+
+void planner_task_summary(planner_proc *p, const char *how) {
+  double dt = ndp_mono() - p->task_t0, live = dt - p->task_stale;
+  fprintf(stderr,
+          PROG ": task %lld %s after %.2f s: %lld plans, %.1f plans/s over %.2f s of fresh "
+          "state, plan %.1f ms mean / %.1f max, %lld mocap frames lost, %lld queue overflows\n",
+          (long long)p->task.task_id, how, dt, (long long)p->task_plans,
+          live > 0 ? p->task_plans / live : 0.0, live, p->task_plans ? p->task_ms_sum / p->task_plans : 0.0,
+          p->task_ms_max, (long long)(p->mocap_lost - p->task_mocap_lost0),
+          (long long)(p->overflows - p->task_overflows0));
+}
+
+static void on_task(const lcm_recv_buf_t *rb, const char *ch, const nudge_task_t *m,
+                    void *user) {
+  (void)rb;
+  planner_proc *p = user;
+  char why[160];
+  p->st.received++;
+  if (ndp_check_task(m, why, sizeof(why))) {
+    planner_reject(p, ch, why);
+    return;
+  }
+  /* A repeated TASK (re-sent for late joiners) neither restarts the warm start nor
+   * revives a task whose end we have seen; its goal is the same by contract. */
+  if ((p->active && m->task_id == p->task.task_id) ||
+      (p->have_ended && m->task_id == p->ended_id))
+    return;
+  if (p->active) planner_task_summary(p, "superseded");
+  p->task = *m;
+  p->active = 1;
+  p->task_t0 = ndp_mono();
+  p->task_plans = 0;
+  p->task_ms_sum = p->task_ms_max = p->task_stale = 0.0;
+  p->task_mocap_lost0 = p->mocap_lost;
+  p->task_overflows0 = p->overflows;
+  nds_planner_reset(p->planner);
+  fprintf(stderr, PROG ": task %lld started: goal (%+.3f, %+.3f) m, yaw %+.1f deg, eps %g, "
+          "limit %.1f s\n", (long long)m->task_id, m->goal_x, m->goal_y,
+          m->goal_yaw * 180.0 / ND_PI, m->eps, m->time_limit);
+}
+
+/* ndp_validate has no check for EPISODE; only task_id and event are used here. */
+static int check_episode(const nudge_episode_t *m, char *why, int len) {
+  if (m->utime <= 0) {
+    snprintf(why, len, "utime = %lld is not a time", (long long)m->utime);
+    return -1;
+  }
+  if (m->task_id < 0) {
+    snprintf(why, len, "task_id = %lld is negative", (long long)m->task_id);
+    return -1;
+  }
+  if (m->event < NUDGE_EPISODE_T_EVENT_START || m->event > NUDGE_EPISODE_T_EVENT_REJECTED) {
+    snprintf(why, len, "event = %d is not a known event", m->event);
+    return -1;
+  }
+  return 0;
+}
+
+/* Raw subscription: lcm-gen's stub would decode a lying string length and crash
+ * (ndp_decode_episode); an undecodable message counts as rejected like a bad one. */
+static void on_episode(const lcm_recv_buf_t *rb, const char *ch, void *user) {
+  planner_proc *p = user;
+  char why[160];
+  nudge_episode_t m;
+  p->st.received++;
+  if (ndp_decode_episode(rb->data, (int)rb->data_size, &m, why, sizeof(why))) {
+    planner_reject(p, ch, why);
+    return;
+  }
+  const int bad = check_episode(&m, why, sizeof(why));
+  if (bad) planner_reject(p, ch, why);
+  if (bad || m.event == NUDGE_EPISODE_T_EVENT_START) {
+    nudge_episode_t_decode_cleanup(&m);
+    return;
+  }
+  p->have_ended = 1;
+  p->ended_id = m.task_id;
+  if (p->active && m.task_id == p->task.task_id) {
+    p->active = 0;
+    planner_task_summary(p, m.event == NUDGE_EPISODE_T_EVENT_SUCCESS   ? "succeeded"
+                    : m.event == NUDGE_EPISODE_T_EVENT_TIMEOUT ? "timed out"
+                                                                : "was rejected");
+  }
+  nudge_episode_t_decode_cleanup(&m);
+}
+
+static void on_params(const lcm_recv_buf_t *rb, const char *ch, const nudge_params_t *m,
+                      void *user) {
+  (void)rb;
+  planner_proc *p = user;
+  char why[160];
+  p->st.received++;
+  if (ndp_check_params(m, why, sizeof(why))) {
+    planner_reject(p, ch, why);
+    return;
+  }
+  if (m->version == p->theta_version) return;
+  if (nds_planner_set_theta(p->planner, m->theta_mean, why, sizeof(why))) {
+    planner_reject(p, ch, why);
+    return;
+  }
+  p->theta_version = m->version;
+  fprintf(stderr, PROG ": theta version %lld: (%g, %g, %g, %g)\n", (long long)m->version,
+          m->theta_mean[0], m->theta_mean[1], m->theta_mean[2], m->theta_mean[3]);
+}
+
+/* Bytes on a typed channel that are not one message of its type: counted and logged
+ * like any refused input. */
+static void undecodable(void *user, const char *ch, const char *why) {
+  planner_proc *p = user;
+  p->st.received++;
+  planner_reject(p, ch, why);
+}
+
+NDP_TYPED_HANDLER(nudge_mocap_t, on_mocap_raw, on_mocap, undecodable)
+NDP_TYPED_HANDLER(nudge_robot_state_t, on_robot_state_raw, on_robot_state, undecodable)
+NDP_TYPED_HANDLER(nudge_ee_cmd_t, on_ee_cmd_raw, on_ee_cmd, undecodable)
+NDP_TYPED_HANDLER(nudge_task_t, on_task_raw, on_task, undecodable)
+NDP_TYPED_HANDLER(nudge_params_t, on_params_raw, on_params, undecodable)
+
+/* ---------------------------------------------------------------------------------- */
+
+
+int planner_subscribe(planner_proc *p, char *err, int errlen) {
+  /* A plan keeps this thread away from LCM for tens of ms, and LCM drops the NEWEST
+   * message when a subscription's queue (default 30) is full: at 1 kHz the drain after a
+   * plan would then hand over state from the plan's first 30 ms. Queues of ~0.5 s of
+   * input keep the newest; a longer stall is detected (ndp_input_drained). */
+  p->in_mocap.cap = 128;
+  p->in_rs.cap = p->in_cmd.cap = 500;
+  lcm_subscription_t *s_mocap = lcm_subscribe(p->lcm, NDP_CH_MOCAP, on_mocap_raw, p);
+  lcm_subscription_t *s_rs = lcm_subscribe(p->lcm, NDP_CH_ROBOT_STATE, on_robot_state_raw, p);
+  lcm_subscription_t *s_cmd = lcm_subscribe(p->lcm, NDP_CH_EE_CMD, on_ee_cmd_raw, p);
+  if (!s_mocap || !s_rs || !s_cmd || !lcm_subscribe(p->lcm, NDP_CH_TASK, on_task_raw, p) ||
+      !lcm_subscribe(p->lcm, NDP_CH_PARAMS, on_params_raw, p) ||
+      !lcm_subscribe(p->lcm, NDP_CH_EPISODE, on_episode, p) ||
+      lcm_subscription_set_queue_capacity(s_mocap, p->in_mocap.cap) ||
+      lcm_subscription_set_queue_capacity(s_rs, p->in_rs.cap) ||
+      lcm_subscription_set_queue_capacity(s_cmd, p->in_cmd.cap)) {
+    snprintf(err, errlen, "subscribing to the input channels failed");
+    return -1;
+  }
+  return 0;
+}
+
+void planner_drained(planner_proc *p) {
+  p->overflows += ndp_input_drained(&p->in_mocap) + ndp_input_drained(&p->in_rs) +
+                  ndp_input_drained(&p->in_cmd);
+}
+
+/* 1 if a plan may start now: mocap and robot state fresh, and the setpoint not known to
+ * be behind while the executor is live (its next message is a millisecond away).
+ * Ages count from each message's sending, so input that queued up while this process
+ * was busy or stopped is as old as it is: after a stall the planner waits for new state
+ * instead of planning from what the socket kept (the oldest, once it overflowed). */
+int planner_state_fresh(const planner_proc *p, double now) {
+  const double to = p->o->state_timeout;
+  return ndp_input_fresh(&p->in_mocap, now, to) && ndp_input_fresh(&p->in_rs, now, to) &&
+         !(p->in_cmd.behind && now - p->in_cmd.t <= to);
+}
+

@@ -1,0 +1,88 @@
+/* planner: what the files of nudge-planner share.
+ *
+ *   main.c    options and wiring: models, pool, LCM, the plan loop
+ *   inputs.c  the input channels: validation, the newest of each, the task in hand
+ *   plan.c    one plan from the newest inputs, published on PLAN
+ *
+ * The process keeps the newest world state from MOCAP (object pose) and ROBOT_STATE
+ * (end-effector), the executor's setpoint from EE_CMD, the goal from TASK and theta from
+ * PARAMS. While a task is active and the state is fresh it plans back to back. Planning
+ * runs in the main thread between LCM drains: it is not a 1 kHz process, and the queues
+ * are sized so a plan's duration of input fits in them. */
+#ifndef PLANNER_H
+#define PLANNER_H
+
+#include "nd_objest.h"
+#include "nd_parse.h"
+#include "nds_planner.h"
+#include "ndp.h"
+#include "ndp_validate.h"
+
+#define PROG "nudge-planner"
+
+typedef struct {
+  const char *url;
+  int threads, pop, iters;
+  double plan_dt;
+  uint64_t seed;
+  double max_rate;       /* Hz */
+  double state_timeout;  /* s */
+  double theta[ND_NTHETA];
+  nd_box ws;             /* keypoint box, m */
+} planner_opts;
+
+/* The process's mutable state, owned by the main thread (LCM handlers run inside
+ * lcm_handle on it, never during a plan). */
+typedef struct {
+  const planner_opts *o;
+  lcm_t *lcm;
+  nds_planner *planner;
+  ndp_status st;
+
+  /* newest inputs */
+  nudge_mocap_t mocap;
+  ndp_input in_mocap;
+  nd_objest est;               /* the object's velocity from the MOCAP frames */
+  int64_t mocap_lost;          /* frames missing by seq */
+  int64_t overflows;           /* drains that found a full queue */
+  nudge_robot_state_t rs;
+  ndp_input in_rs;
+  nudge_ee_cmd_t cmd;
+  ndp_input in_cmd;
+
+  /* task */
+  int active;
+  nudge_task_t task;
+  int have_ended;
+  int64_t ended_id;            /* last task an EPISODE ended: a repeated TASK for it is old */
+  double task_t0;
+  int64_t task_plans, task_mocap_lost0, task_overflows0;
+  double task_ms_sum, task_ms_max;
+  double task_stale;           /* s of the task spent without fresh state */
+
+  int64_t theta_version;       /* params_t.version in use; -1 = --theta */
+  int64_t plan_id;
+  ndp_ratelog rejected;        /* rate-limited log of refused inputs */
+} planner_proc;
+
+/* Count a refused input in the heartbeat and log it, rate-limited. */
+void planner_reject(planner_proc *p, const char *channel, const char *why);
+
+/* Subscribe every input channel of p on p->lcm, with queues that hold a plan's worth of
+ * input. Return 0, or -1 with a message. */
+int planner_subscribe(planner_proc *p, char *err, int errlen);
+
+/* After a drain: count the streams whose queue overflowed. */
+void planner_drained(planner_proc *p);
+
+/* 1 if a plan may start now: MOCAP and ROBOT_STATE fresh, and the setpoint not known to be
+ * behind while the executor is live. */
+int planner_state_fresh(const planner_proc *p, double now);
+
+/* Print the active task's summary line ("succeeded", "interrupted", ...). */
+void planner_task_summary(planner_proc *p, const char *how);
+
+/* Plan from the newest inputs and publish PLAN. Return 0, or -1 with a message (LCM). */
+int planner_plan_once(planner_proc *p, double now, char *err, int errlen);
+
+#endif

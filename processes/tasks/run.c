@@ -1,0 +1,200 @@
+/* run: one task, from TASK to EPISODE, and what happens between tasks (tasks.h). */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "nd_cost.h"
+#include "nd_math.h"
+#include "tasks.h"
+
+static double yaw_error(double yaw, double goal_yaw) {
+  double e = fabs(nd_wrap_angle(yaw - goal_yaw));
+  return e > 0.5 * ND_PI ? ND_PI - e : e;
+}
+
+/* Errors of the newest frame against goal g. */
+static void measure(const tasks_io *io, const nd_cost_weights *w, const nd_goal *g,
+                    tasks_result *r) {
+  const double yaw = nd_quat_yaw(io->last.obj_quat);
+  r->task_error = nd_task_error(w, g, io->last.obj_pos, yaw);
+  r->pos_err = hypot(io->last.obj_pos[0] - g->x, io->last.obj_pos[1] - g->y);
+  r->yaw_err = yaw_error(yaw, g->yaw);
+}
+
+static int publish_episode(lcm_t *lcm, tasks_io *io, int64_t task_id, int event,
+                           const char *reason, double time, double task_error) {
+  nudge_episode_t e;
+  memset(&e, 0, sizeof(e));
+  e.utime = ndp_utime();
+  e.task_id = task_id;
+  e.event = (int8_t)event;
+  e.reason = (char *)reason;
+  e.time = time;
+  e.task_error = task_error;
+  if (nudge_episode_t_publish(lcm, NDP_CH_EPISODE, &e) != 0) return -1;
+  io->st.published++;
+  return 0;
+}
+
+/* Handle LCM and the heartbeat for up to dt seconds. 0, or -1 with a message. */
+int tasks_pump(lcm_t *lcm, tasks_io *io, double dt, char *err, int errlen) {
+  if (ndp_handle(lcm, dt) || ndp_status_tick(lcm, &io->st, 0) < 0) {
+    snprintf(err, errlen, "LCM failed while receiving or publishing");
+    return -1;
+  }
+  return 0;
+}
+
+/* Wait until a valid MOCAP frame arrives (and, when recording, a ROBOT_STATE: the first
+ * task's start state needs one), up to wait s. 1 if they did, 0 if not (or interrupted),
+ * -1 on an LCM failure. */
+int tasks_wait_mocap(lcm_t *lcm, tasks_io *io, double wait, char *err, int errlen) {
+  const double t_end = ndp_mono() + wait;
+  /* MOCAP alone would do for a runner started long after the bridge, but one started (or
+   * restarted) while both streams flow may see a MOCAP frame first and would begin its
+   * first task without a start state: that task would not be recorded. */
+  while ((!io->frames || (io->buf && !io->buf->have_rs)) && !ndp_quit) {
+    const double left = t_end - ndp_mono();
+    if (left <= 0.0) return 0;
+    if (tasks_pump(lcm, io, fmin(left, 0.1), err, errlen)) return -1;
+  }
+  return io->frames > 0 && (!io->buf || io->buf->have_rs);
+}
+
+/* Run goal g as task id: publish it, follow MOCAP to the terminal condition, publish the
+ * outcome. 0 with r filled, or -1 with a message on an LCM failure. */
+int tasks_run(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, const nd_goal *g, int64_t id,
+              tasks_result *r, char *err, int errlen) {
+  const nd_cost_weights w = nd_cost_weights_default();
+  const nd_goal goal = {.x = g->x, .y = g->y, .yaw = g->yaw};
+  const double eps = g->eps > 0.0 ? g->eps : c->eps;
+  const double tau = g->tau > 0.0 ? g->tau : c->tau;
+  memset(r, 0, sizeof(*r));
+  measure(io, &w, &goal, r);
+
+  if (fabs(g->x) > c->workspace || fabs(g->y) > c->workspace) {
+    r->event = NUDGE_EPISODE_T_EVENT_REJECTED;
+    snprintf(r->reason, sizeof(r->reason),
+             "goal (%.3f, %.3f) m is outside the workspace |x|, |y| <= %.2f m", g->x, g->y,
+             c->workspace);
+    if (publish_episode(lcm, io, id, r->event, r->reason, 0.0, r->task_error)) goto fail;
+    return 0;
+  }
+
+  nudge_task_t t;
+  memset(&t, 0, sizeof(t));
+  t.utime = ndp_utime();
+  t.task_id = id;
+  t.goal_x = g->x;
+  t.goal_y = g->y;
+  t.goal_yaw = g->yaw;
+  t.eps = eps;
+  t.time_limit = tau;
+  if (io->buf) tasks_buffer_begin(io->buf, &io->last, id, &goal);
+  const double t0 = ndp_mono();
+  if (nudge_task_t_publish(lcm, NDP_CH_TASK, &t) != 0) goto fail;
+  io->st.published++;
+  if (publish_episode(lcm, io, id, NUDGE_EPISODE_T_EVENT_START, "", 0.0, r->task_error))
+    goto fail;
+  io->st.state = "running";
+  io->fresh = 0;
+
+  double next_task = t0 + 1.0;
+  int gap_warned = 0;
+  nd_task_status s = ND_TASK_RUNNING;
+  for (;;) {
+    if (tasks_pump(lcm, io, 0.02, err, errlen)) return -1;
+    const double now = ndp_mono();
+    if (ndp_quit) {
+      r->interrupted = 1;
+      r->time = now - t0;
+      break;
+    }
+    if (io->fresh) {
+      io->fresh = 0;
+      measure(io, &w, &goal, r);
+      r->time = io->t_last - t0;
+      s = nd_task_check(r->task_error, r->time, eps, tau);
+      gap_warned = 0;
+    }
+    /* The limit holds even when frames stop coming: judge the last frame at the clock. */
+    if (s == ND_TASK_RUNNING && now - t0 > tau) {
+      r->time = now - t0;
+      s = ND_TASK_TIMEOUT;
+    }
+    if (s != ND_TASK_RUNNING) break;
+    if (!gap_warned && now - io->t_last > MOCAP_GAP_WARN) {
+      fprintf(stderr, PROG ": no MOCAP frame for %.1f s during task %lld\n", now - io->t_last,
+              (long long)id);
+      gap_warned = 1;
+    }
+    /* Unchanged, so a planner that starts late or restarts picks the task up. */
+    if (now >= next_task) {
+      if (nudge_task_t_publish(lcm, NDP_CH_TASK, &t) != 0) goto fail;
+      io->st.published++;
+      next_task += 1.0;
+    }
+  }
+
+  const double age = ndp_mono() - io->t_last;
+  if (r->interrupted) {
+    r->event = NUDGE_EPISODE_T_EVENT_TIMEOUT;
+    snprintf(r->reason, sizeof(r->reason), "interrupted: the runner was stopped at %.2f s",
+             r->time);
+  } else if (s == ND_TASK_SUCCESS) {
+    r->event = NUDGE_EPISODE_T_EVENT_SUCCESS;
+    snprintf(r->reason, sizeof(r->reason), "task error %.3g < eps %.3g", r->task_error, eps);
+  } else {
+    r->event = NUDGE_EPISODE_T_EVENT_TIMEOUT;
+    snprintf(r->reason, sizeof(r->reason), "task error %.3g >= eps %.3g after %.2f s%s",
+             r->task_error, eps, tau, age > MOCAP_GAP_WARN ? " (MOCAP stale)" : "");
+  }
+  if (publish_episode(lcm, io, id, r->event, r->reason, r->time, r->task_error)) goto fail;
+  return 0;
+fail:
+  snprintf(err, errlen, "cannot publish on LCM");
+  return -1;
+}
+
+/* "task 3/5 goal (+0.20, +0.00, +0.0 deg): reached in 2.41 s, pos err ..." */
+void tasks_print(int i, int n, const nd_goal *g, const tasks_result *r) {
+  printf("task %d/%d goal (%+.2f, %+.2f, %+.1f deg): ", i + 1, n, g->x, g->y,
+         g->yaw * 180.0 / ND_PI);
+  if (r->event == NUDGE_EPISODE_T_EVENT_REJECTED) {
+    printf("rejected: %s\n", r->reason);
+  } else {
+    const char *what = r->interrupted ? "interrupted after"
+                       : r->event == NUDGE_EPISODE_T_EVENT_SUCCESS ? "reached in"
+                                                                   : "timed out after";
+    printf("%s %.2f s, pos err %.3f m, yaw err %.1f deg\n", what, r->time, r->pos_err,
+           r->yaw_err * 180.0 / ND_PI);
+  }
+  fflush(stdout);
+}
+
+
+/* Between tasks: with --await-fit, wait for PARAMS fitted on the record just appended (the
+ * paper's task -> append -> refit protocol; the adapter's count may stay below ours if it
+ * refused a record, hence the limit); then let the object come to rest. */
+int tasks_pause(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, int rejected, char *err,
+                int errlen) {
+  tasks_buffer *b = io->buf;
+  if (c->await_fit > 0 && b && b->last_ok) {
+    io->st.state = "awaiting fit";
+    const double t0 = ndp_mono(), t_end = t0 + c->await_fit;
+    while (!ndp_quit && ndp_mono() < t_end && b->params_n < b->w.records)
+      if (tasks_pump(lcm, io, fmin(0.05, t_end - ndp_mono()), err, errlen)) return -1;
+    if (b->params_n >= b->w.records)
+      fprintf(stderr, PROG ": PARAMS version %lld (fitted on %d rollouts) after %.2f s\n",
+              (long long)b->theta_version, (int)b->params_n, ndp_mono() - t0);
+    else if (!ndp_quit)
+      fprintf(stderr, PROG ": no PARAMS fitted on %lld rollouts within %g s; going on\n",
+              (long long)b->w.records, c->await_fit);
+  }
+  if (rejected) return 0;
+  io->st.state = "settling";
+  const double t_end = ndp_mono() + c->settle;
+  while (!ndp_quit && ndp_mono() < t_end)
+    if (tasks_pump(lcm, io, fmin(0.05, t_end - ndp_mono()), err, errlen)) return -1;
+  return 0;
+}

@@ -1,0 +1,108 @@
+/* tasks: what the files of nudge-tasks, the episode runner, share.
+ *
+ *   main.c    options, the goal chain, the summary
+ *   inputs.c  the channels: MOCAP for the terminal condition, and with --record the
+ *             robot's and executor's streams and PARAMS
+ *   run.c     one task: TASK out, the object followed to the terminal condition, EPISODE
+ *   record.c  the replay buffer: each task's rollout (core/nd_recorder.h) appended
+ *
+ * The runner publishes one pushing task at a time, watches the object on MOCAP, ends the
+ * task on the terminal condition (L_pos + w_rot L_rot < eps, or the time limit) and reports
+ * it on EPISODE and as one line on stdout. The object is not reset between tasks (a real
+ * robot cannot do that): each goal starts where the previous task left the object. Times
+ * are measured on this host's monotonic clock, from the TASK publication to the arrival of
+ * the MOCAP frame that met the condition.
+ *
+ * A full or read-only file system (or an I/O error) does not stop the tasks: recording is
+ * what the runner does besides its job. The failed append is reported with the file and
+ * the reason, the records already in the file stay as they were (nd_rfile cuts a partial
+ * write back), the next task tries again, and the summary and the exit status (3) say how
+ * many tasks were lost. A buffer that is not ours to write (another recorder holds it, not
+ * a record file, no permission, no such directory) is refused at the start instead: that
+ * is a wrong argument, not a condition that may pass. */
+#ifndef TASKS_H
+#define TASKS_H
+
+#include "nd_goal.h"
+#include "nd_rbuf.h"
+#include "nd_recorder.h"
+#include "ndp.h"
+#include "ndp_validate.h"
+
+#define PROG "nudge-tasks"
+#define MAX_GOALS 1000
+#define MOCAP_GAP_WARN 0.5 /* s without a frame during a task before saying so */
+
+/* What the runner was asked to do; constant once parsed. */
+typedef struct {
+  double eps, tau;  /* defaults for goals that set none */
+  double workspace; /* goals need |x|, |y| <= workspace, m */
+  double wait;      /* for the first MOCAP frame, s */
+  double settle;    /* between tasks, s */
+  const char *url;
+  const char *record;            /* replay buffer to append to; NULL: no recording */
+  double record_dt;              /* the robot's control step, s */
+  double theta[ND_NTHETA];       /* recorded as the planner's theta until PARAMS arrives */
+  double await_fit;              /* s to wait for the adapter's refit after a record; 0 none */
+  nd_goal goals[MAX_GOALS];
+  int n;
+} tasks_cfg;
+
+/* The replay buffer and the rollout being recorded into it. */
+typedef struct {
+  nd_rfile_writer w;
+  nd_recorder rec;
+  nd_rec_state rs;       /* the newest robot state, kept across tasks */
+  int have_rs;
+  double theta[ND_NTHETA];
+  int64_t theta_version; /* -1: --theta */
+  int32_t params_n;      /* rollouts the newest PARAMS was fitted on */
+  int64_t appended;
+  int last_ok;           /* the last task was appended */
+  int64_t failed;        /* finished rollouts whose append failed (file system, I/O) */
+  char last_err[600];    /* why the newest of them failed */
+  const char *path;      /* the buffer, also while it cannot be opened */
+} tasks_buffer;
+
+/* What the LCM handlers update. */
+typedef struct {
+  nudge_mocap_t last; /* newest valid frame */
+  double t_last;      /* its arrival, ndp_mono() */
+  int64_t frames;     /* valid frames received */
+  int fresh;          /* a valid frame arrived since the runner last looked */
+  ndp_status st;
+  ndp_ratelog refused;
+  tasks_buffer *buf;  /* NULL without --record */
+} tasks_io;
+
+/* How one task ended. */
+typedef struct {
+  int event;         /* NUDGE_EPISODE_T_EVENT_* */
+  int interrupted;   /* ended by SIGINT/SIGTERM */
+  double time;       /* s since the task started */
+  double task_error;
+  double pos_err;    /* m */
+  double yaw_err;    /* rad, modulo the cuboid's half-turn, in [0, pi/2] */
+  char reason[200];
+} tasks_result;
+
+/* inputs.c: subscribe MOCAP, and with io->buf the recording's channels. 0 or -1. */
+int tasks_subscribe(tasks_io *io, lcm_t *lcm, char *err, int errlen);
+
+/* record.c */
+int tasks_buffer_open(tasks_buffer *b, const char *path, double tau, double dt,
+                      const double theta[ND_NTHETA], char *err, int errlen);
+void tasks_buffer_close(tasks_buffer *b);
+void tasks_buffer_begin(tasks_buffer *b, const nudge_mocap_t *m, int64_t id, const nd_goal *g);
+void tasks_buffer_finish(tasks_buffer *b, int64_t id, int outcome);
+
+/* run.c */
+int tasks_pump(lcm_t *lcm, tasks_io *io, double dt, char *err, int errlen);
+int tasks_wait_mocap(lcm_t *lcm, tasks_io *io, double wait, char *err, int errlen);
+int tasks_run(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, const nd_goal *g, int64_t id,
+              tasks_result *r, char *err, int errlen);
+void tasks_print(int i, int n, const nd_goal *g, const tasks_result *r);
+int tasks_pause(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, int rejected, char *err,
+                int errlen);
+
+#endif
