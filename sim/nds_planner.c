@@ -200,10 +200,14 @@ int nds_planner_plan(nds_planner *p, const nds_state *s, const double sp0[2][4],
   for (int k = 0; k < c->M; k++) memcpy(out->keys[k], best + 4 * k, 4 * sizeof(double));
   out->cost = nd_cem_best_cost(p->cem);
   out->evals = nd_cem_evals(p->cem);
-  /* The predicted task error of the best plan, for logging and for the plan message. */
+  /* What the best plan predicts, for logging, drawing and the plan message; a diverged
+   * rollout predicts the object stays where it is. */
   nds_rollout_out o;
   nds_rollout(nds_batch_model(p->batch, 0), nds_batch_data(p->batch, 0), &c->ctrl, s, sp0,
               best, c->M, c->T, &o);
   out->task_error = o.diverged ? INFINITY : nd_task_error(&c->w, goal, o.obj_xy, o.obj_yaw);
+  out->predicted[0] = o.diverged ? s->obj_pos[0] : o.obj_xy[0];
+  out->predicted[1] = o.diverged ? s->obj_pos[1] : o.obj_xy[1];
+  out->predicted[2] = o.diverged ? nds_state_yaw(s) : o.obj_yaw;
   return 0;
 }

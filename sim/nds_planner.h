@@ -36,6 +36,7 @@ typedef struct {
   double T;
   double cost;              /* E of the best candidate (penalties included) */
   double task_error;        /* predicted L_pos + w_rot L_rot at the horizon */
+  double predicted[3];      /* the object's pose (x, y, yaw) the best rollout ends at */
   int evals;                /* rollouts run */
 } nds_plan;
 

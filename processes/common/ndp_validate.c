@@ -5,6 +5,8 @@
 #include <stdint.h>
 #include <stdio.h>
 
+#include "nd_theta.h"
+
 /* 0 if all n values are finite and |x| <= lim, else -1 with "<what>[i] = v". */
 static int vec_ok(const double *x, int n, double lim, const char *what, char *why, int len) {
   for (int i = 0; i < n; i++)
@@ -46,6 +48,18 @@ int ndp_check_robot_state(const nudge_robot_state_t *m, char *why, int len) {
       vec_ok(m->ee_vel, 3, NDP_MAX_VEL, "ee_vel", why, len) ||
       vec_ok(m->ee_force, 3, NDP_MAX_FORCE, "ee_force", why, len))
     return -1;
+  if (m->mode < NUDGE_ROBOT_STATE_T_MODE_TRACKING || m->mode > NUDGE_ROBOT_STATE_T_MODE_STOPPED) {
+    snprintf(why, len, "mode = %d is not a known mode", m->mode);
+    return -1;
+  }
+  if (m->reflex < NUDGE_ROBOT_STATE_T_REFLEX_NONE ||
+      m->reflex > NUDGE_ROBOT_STATE_T_REFLEX_CART_JERK ||
+      (m->reflex != NUDGE_ROBOT_STATE_T_REFLEX_NONE) != (m->mode == NUDGE_ROBOT_STATE_T_MODE_STOPPED) ||
+      m->reflex_joint < 0 || m->reflex_joint > 7) {
+    snprintf(why, len, "reflex %d on joint %d with mode %d is not a known reflex", m->reflex,
+             m->reflex_joint, m->mode);
+    return -1;
+  }
   return 0;
 }
 
@@ -79,6 +93,11 @@ int ndp_check_plan(const nudge_plan_t *m, char *why, int len) {
         vec_ok(m->keypoints[k] + 2, 2, NDP_MAX_VEL, "keypoint velocity", why, len))
       return -1;
   }
+  /* The prediction is for drawing and figures: a diverged rollout may predict nonsense,
+   * but never a number the receivers cannot hold. */
+  if (vec_ok(m->predicted, 2, NDP_MAX_POS, "predicted", why, len) ||
+      vec_ok(m->predicted + 2, 1, 100.0, "predicted yaw", why, len))
+    return -1;
   return 0;
 }
 
@@ -103,17 +122,16 @@ int ndp_check_task(const nudge_task_t *m, char *why, int len) {
 }
 
 int ndp_check_params(const nudge_params_t *m, char *why, int len) {
-  static const char *names[4] = {"sliding friction", "torsional friction", "rolling friction",
-                                 "sphere mass"};
+  char th[200];
   if (utime_ok(m->utime, why, len)) return -1;
-  for (int i = 0; i < 4; i++) {
-    double v = m->theta_mean[i], s = m->theta_std[i];
-    if (!isfinite(v) || v < 0.0 || (i == 3 && v <= 0.0) || v > 1e4) {
-      snprintf(why, len, "theta_mean[%d] (%s) = %g is not a valid value", i, names[i], v);
-      return -1;
-    }
+  if (nd_theta_check(m->theta_mean, th, sizeof(th))) {
+    snprintf(why, len, "theta_mean: %s", th);
+    return -1;
+  }
+  for (int i = 0; i < ND_NTHETA; i++) {
+    const double s = m->theta_std[i];
     if (!isfinite(s) || s < 0.0) {
-      snprintf(why, len, "theta_std[%d] (%s) = %g is not a valid std", i, names[i], s);
+      snprintf(why, len, "theta_std[%d] (%s) = %g is not a valid std", i, nd_theta_name[i], s);
       return -1;
     }
   }
@@ -122,6 +140,14 @@ int ndp_check_params(const nudge_params_t *m, char *why, int len) {
              (long long)m->version, m->buffer_size);
     return -1;
   }
+  return 0;
+}
+
+int ndp_check_arm_state(const nudge_arm_state_t *m, char *why, int len) {
+  /* Bounds far beyond any arm's joints (a few rad, a few rad/s, hundreds of N m). */
+  if (utime_ok(m->utime, why, len) || vec_ok(m->q, 7, 10.0, "q", why, len) ||
+      vec_ok(m->dq, 7, 100.0, "dq", why, len) || vec_ok(m->tau, 7, 1e4, "tau", why, len))
+    return -1;
   return 0;
 }
 

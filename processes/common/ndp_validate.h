@@ -5,6 +5,7 @@
 #ifndef NDP_VALIDATE_H
 #define NDP_VALIDATE_H
 
+#include "nudge/nudge_arm_state_t.h"
 #include "nudge/nudge_ee_cmd_t.h"
 #include "nudge/nudge_episode_t.h"
 #include "nudge/nudge_mocap_t.h"
@@ -14,6 +15,8 @@
 #include "nudge/nudge_status_t.h"
 #include "nudge/nudge_task_t.h"
 #include "nd_snap.h"
+
+#include "nd_theta.h"
 
 _Static_assert(ND_MAX_KEYS == NUDGE_PLAN_T_MAX_KEYPOINTS,
                "plan_t carries as many keypoints as the planner and executor handle");
@@ -31,6 +34,7 @@ int ndp_check_ee_cmd(const nudge_ee_cmd_t *m, char *why, int len);
 int ndp_check_plan(const nudge_plan_t *m, char *why, int len);
 int ndp_check_task(const nudge_task_t *m, char *why, int len);
 int ndp_check_params(const nudge_params_t *m, char *why, int len);
+int ndp_check_arm_state(const nudge_arm_state_t *m, char *why, int len);
 
 /* Decode EPISODE / STATUS bytes (the types with strings) without trusting them: the
  * decoders lcm-gen 1.3.1 generates take a string's length word as given, so a negative

@@ -109,7 +109,7 @@ static int check_episode(const nudge_episode_t *m, char *why, int len) {
     snprintf(why, len, "task_id = %lld is negative", (long long)m->task_id);
     return -1;
   }
-  if (m->event < NUDGE_EPISODE_T_EVENT_START || m->event > NUDGE_EPISODE_T_EVENT_REJECTED) {
+  if (m->event < NUDGE_EPISODE_T_EVENT_START || m->event > NUDGE_EPISODE_T_EVENT_STOPPED) {
     snprintf(why, len, "event = %d is not a known event", m->event);
     return -1;
   }
@@ -138,8 +138,9 @@ static void on_episode(const lcm_recv_buf_t *rb, const char *ch, void *user) {
   if (p->active && m.task_id == p->task.task_id) {
     p->active = 0;
     planner_task_summary(p, m.event == NUDGE_EPISODE_T_EVENT_SUCCESS   ? "succeeded"
-                    : m.event == NUDGE_EPISODE_T_EVENT_TIMEOUT ? "timed out"
-                                                                : "was rejected");
+                            : m.event == NUDGE_EPISODE_T_EVENT_TIMEOUT ? "timed out"
+                            : m.event == NUDGE_EPISODE_T_EVENT_STOPPED ? "ended in a reflex stop"
+                                                                        : "was rejected");
   }
   nudge_episode_t_decode_cleanup(&m);
 }

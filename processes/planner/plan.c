@@ -52,6 +52,7 @@ int planner_plan_once(planner_proc *p, double now, char *err, int errlen) {
   m.T = plan.T;
   m.cost = plan.cost;
   m.task_error = plan.task_error;
+  memcpy(m.predicted, plan.predicted, sizeof(m.predicted));
   m.iterations = o->iters;
   m.evals = plan.evals;
   m.plan_ms = ms;

@@ -38,7 +38,13 @@ static void fz_valid_mocap(const nudge_mocap_t *m) {
 
 static void fz_valid_robot_state(const nudge_robot_state_t *m) {
   FZ_CHECK(m->utime > 0 && fz_bounded(m->ee_pos, 3, NDP_MAX_POS) &&
-           fz_bounded(m->ee_vel, 3, NDP_MAX_VEL) && fz_bounded(m->ee_force, 3, NDP_MAX_FORCE),
+           fz_bounded(m->ee_vel, 3, NDP_MAX_VEL) && fz_bounded(m->ee_force, 3, NDP_MAX_FORCE) &&
+           m->mode >= NUDGE_ROBOT_STATE_T_MODE_TRACKING &&
+           m->mode <= NUDGE_ROBOT_STATE_T_MODE_STOPPED &&
+           (m->reflex != NUDGE_ROBOT_STATE_T_REFLEX_NONE) ==
+               (m->mode == NUDGE_ROBOT_STATE_T_MODE_STOPPED) &&
+           m->reflex <= NUDGE_ROBOT_STATE_T_REFLEX_CART_JERK && m->reflex_joint >= 0 &&
+           m->reflex_joint <= 7,
            "accepted robot_state out of bounds");
 }
 
@@ -56,6 +62,13 @@ static void fz_valid_plan(const nudge_plan_t *m) {
   for (int k = 0; k < m->M; k++)
     FZ_CHECK(fz_bounded(m->keypoints[k], 2, NDP_MAX_POS) &&
              fz_bounded(m->keypoints[k] + 2, 2, NDP_MAX_VEL), "accepted keypoint %d", k);
+  FZ_CHECK(fz_bounded(m->predicted, 2, NDP_MAX_POS) && fz_bounded(m->predicted + 2, 1, 100.0),
+           "accepted a prediction out of bounds");
+}
+
+static void fz_valid_arm_state(const nudge_arm_state_t *m) {
+  FZ_CHECK(m->utime > 0 && fz_bounded(m->q, 7, 10.0) && fz_bounded(m->dq, 7, 100.0) &&
+           fz_bounded(m->tau, 7, 1e4), "accepted arm_state out of bounds");
 }
 
 static void fz_valid_task(const nudge_task_t *m) {
@@ -115,6 +128,7 @@ FZ_FIXED(ee_cmd)
 FZ_FIXED(plan)
 FZ_FIXED(task)
 FZ_FIXED(params)
+FZ_FIXED(arm_state)
 
 /* ---- the types with strings ---- */
 
@@ -197,6 +211,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
   fz_plan(data, len);
   fz_task(data, len);
   fz_params(data, len);
+  fz_arm_state(data, len);
   fz_episode(data, len);
   fz_status(data, len);
   fz_history(data, size);

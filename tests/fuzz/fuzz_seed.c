@@ -155,7 +155,7 @@ static void seed_msgs(void) {
                       .obj_quat = {1, 0, 0, 0}, .ee_pos = {-0.05, 0, 0.02}};
   SEED_MSG(mocap_t, mo);
   nudge_robot_state_t rs = {.utime = t, .seq = 8, .ee_pos = {-0.05, 0, 0.02},
-                            .ee_vel = {0.1, 0, 0}, .ee_force = {2, 0, 0}};
+                            .ee_vel = {0.1, 0, 0}, .ee_force = {2, 0, 0}, .mode = 0};
   SEED_MSG(robot_state_t, rs);
   nudge_ee_cmd_t ec = {.utime = t, .seq = 9, .plan_id = 3, .plan_utime = t - 500,
                        .mode = 0, .p = {-0.05, 0, 0.02}, .v = {0.1, 0, 0}, .a = {0.5, 0, 0}};
@@ -163,7 +163,8 @@ static void seed_msgs(void) {
   nudge_plan_t pl = {.utime = t, .plan_id = 3, .task_id = 1, .state_utime = t - 1000,
                      .M = 2, .keypoints = {{0.0, 0.01, 0.2, 0.0}, {0.05, 0.02, 0.1, 0.0}},
                      .T = 0.3, .cost = 0.02, .task_error = 0.01, .iterations = 4,
-                     .evals = 512, .plan_ms = 40, .theta_version = 1};
+                     .evals = 512, .plan_ms = 40, .theta_version = 1,
+                     .predicted = {0.12, 0.01, 0.05}};
   SEED_MSG(plan_t, pl);
   nudge_task_t tk = {.utime = t, .task_id = 1, .goal_x = 0.1, .goal_y = 0.05,
                      .goal_yaw = 0.3, .eps = 0.01, .time_limit = 5};
@@ -180,6 +181,9 @@ static void seed_msgs(void) {
                        .rejected = 1, .period_p50_us = 50, .period_p99_us = 900,
                        .period_max_us = 4000, .overruns = 3, .uptime = 12.5};
   SEED_MSG(status_t, st);
+  nudge_arm_state_t ar = {.utime = t, .seq = 3, .q = {0, -0.3, 0, -2.2, 0, 1.9, 0.8},
+                          .dq = {0.1, 0, 0, 0, 0, 0, 0}, .tau = {0, 10, 0, -5, 0, 1, 0}};
+  SEED_MSG(arm_state_t, ar);
 }
 
 static void seed_goals(void) {

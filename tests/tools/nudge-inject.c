@@ -190,7 +190,7 @@ static void inject_mocap(inj *j) {
 }
 
 static void inject_robot_state(inj *j) {
-  const nudge_robot_state_t ok = {wall_us(), 1, {-0.1, 0, 0.05}, {0, 0, 0}, {0, 0, 0}};
+  const nudge_robot_state_t ok = {.utime = wall_us(), .seq = 1, .ee_pos = {-0.1, 0, 0.05}};
   nudge_robot_state_t m;
 #define RS_BAD(stmt)                                                    \
   do {                                                                  \
