@@ -2,6 +2,7 @@
 #include "nd_test.h"
 
 #include "nd_math.h"
+#include "nd_stats.h"
 
 /* Hamilton product, w first: r = a * b (apply b, then a). */
 static void quat_mul(const double a[4], const double b[4], double r[4]) {
@@ -137,8 +138,29 @@ static void test_vec_helpers(void **state) {
   assert_int_equal(nd_all_finite(bad, 1), 0);
 }
 
+/* Summary statistics ignore what is not finite; quantiles are nearest-rank. */
+static void test_stats(void **state) {
+  (void)state;
+  double v[] = {4, NAN, 1, 3, INFINITY, 2};
+  const nd_stats s = nd_stats_of(v, 6);
+  assert_int_equal(s.n, 4);
+  assert_near(s.mean, 2.5, 1e-15);
+  assert_near(s.median, 2.5, 1e-15);
+  assert_near(s.min, 1, 0);
+  assert_near(s.max, 4, 0);
+  assert_near(s.std, sqrt(5.0 / 3.0), 1e-15);
+  double none[] = {NAN};
+  assert_true(isnan(nd_stats_of(none, 1).mean));
+  double q[] = {5, 1, 4, 2, 3};
+  assert_near(nd_quantile(q, 5, 0.5), 3, 0);
+  assert_near(nd_quantile(q, 5, 0.99), 5, 0);
+  assert_near(nd_quantile(q, 5, 0.0), 1, 0);
+  assert_true(isnan(nd_quantile(q, 0, 0.5)));
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_stats),
       cmocka_unit_test(test_wrap_edges),      cmocka_unit_test(test_wrap_range_sweep),
       cmocka_unit_test(test_yaw_quat_round_trip), cmocka_unit_test(test_yaw_of_composed),
       cmocka_unit_test(test_quat_nlerp),      cmocka_unit_test(test_vec_helpers),

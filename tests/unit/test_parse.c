@@ -4,6 +4,7 @@
 #include <string.h>
 
 #include "nd_parse.h"
+#include "nd_theta.h"
 
 static void test_numbers(void **state) {
   (void)state;
@@ -42,7 +43,50 @@ static void test_list(void **state) {
   }
 }
 
+/* Theta has one validity rule: every entry finite and <= 1e4, frictions >= 0, mass > 0. */
+static void test_theta(void **state) {
+  (void)state;
+  char err[256];
+  double th[ND_NTHETA] = {0};
+  assert_int_equal(nd_theta_parse("0.3,0,1e-4,50", "--theta", th, err, sizeof(err)), 0);
+  assert_near(th[ND_TH_MASS], 50, 0);
+  const double good[ND_NTHETA] = {1, 0.005, 1e-4, 1};
+  assert_int_equal(nd_theta_check(good, err, sizeof(err)), 0);
+  const double bad[4][ND_NTHETA] = {
+      {-1e-9, 0.005, 1e-4, 1}, {1, NAN, 1e-4, 1}, {1, 0.005, 2e4, 1}, {1, 0.005, 1e-4, 0}};
+  for (int k = 0; k < 4; k++) assert_int_equal(nd_theta_check(bad[k], err, sizeof(err)), -1);
+  assert_non_null(strstr(err, "theta[3] (sphere mass) = 0"));
+  assert_int_equal(nd_theta_parse("1,0.005,1e-4,0", "--theta", th, err, sizeof(err)), -1);
+  assert_non_null(strstr(err, "--theta: theta[3]"));
+  assert_near(th[ND_TH_MASS], 50, 0);  /* a refused value leaves theta as it was */
+  unsigned m = 0;
+  char names[64];
+  assert_int_equal(nd_theta_parse_mask("mass,slide", "--fit", &m, err, sizeof(err)), 0);
+  assert_int_equal(m, 1u << ND_TH_MASS | 1u << ND_TH_SLIDE);
+  nd_theta_mask_str(m, names, sizeof(names));
+  assert_string_equal(names, "slide,mass");
+  const char *badm[] = {"slide,slide", "friction", "", ",", "slide,", "slide,,mass"};
+  for (int k = 0; k < 6; k++) {
+    assert_int_equal(nd_theta_parse_mask(badm[k], "--fit", &m, err, sizeof(err)), -1);
+    assert_non_null(strstr(err, "--fit"));
+  }
+}
+
+static void test_box(void **state) {
+  (void)state;
+  char err[256];
+  nd_box b;
+  assert_int_equal(nd_parse_box("-0.4,-0.3,0.4,0.3", "--workspace", 10, &b, err, sizeof(err)), 0);
+  assert_near(b.lo[1], -0.3, 0);
+  assert_near(b.hi[0], 0.4, 0);
+  const char *bad[] = {"0.4,-0.3,-0.4,0.3", "0,0,0,0", "-20,0,1,1", "1,2,3"};
+  for (int k = 0; k < 4; k++)
+    assert_int_equal(nd_parse_box(bad[k], "--workspace", 10, &b, err, sizeof(err)), -1);
+  assert_non_null(strstr(err, "--workspace"));
+}
+
 int main(void) {
-  const struct CMUnitTest tests[] = {cmocka_unit_test(test_numbers), cmocka_unit_test(test_list)};
+  const struct CMUnitTest tests[] = {cmocka_unit_test(test_numbers), cmocka_unit_test(test_list),
+                                     cmocka_unit_test(test_theta), cmocka_unit_test(test_box)};
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

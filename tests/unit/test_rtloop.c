@@ -1,31 +1,15 @@
-/* test_rtloop: the executor's 1 kHz cycle (processes/exec_loop.c) allocates nothing
- * and makes no blocking call, through every path it has.
+/* test_rtloop: the executor's 1 kHz cycle (processes/executor/exec_loop.c) allocates
+ * nothing and makes no blocking call, through every path it has (counted by rt_count.h's
+ * wrappers), and the real-time loop's overrun policies (core/nd_rtloop.c) on synthetic
+ * time.
  *
- * The test is linked with -Wl,--wrap for the allocator (malloc, calloc, realloc,
- * reallocarray, free, posix_memalign, aligned_alloc, memalign, valloc, strdup, strndup)
- * and for calls that can block or do I/O (write, read, stdio output, poll, sleeps,
- * mutex and condition waits, fsync, lcm_publish). --wrap rewrites every reference to X
- * in the objects of this link, the static libraries exec_loop, nd_core and
- * nd_lcmtypes included, into __wrap_X; the wrappers below count calls while a window is
- * open and go on to __real_X. One window spans 100k+ cycles on synthetic time, through
- * the first robot state, plan switches at 20 Hz, plans stretched by the limits and plans
- * refused by them, a stale plan (brake, hold), a stale robot state (brake, hold, plans
- * kept waiting), plans refused for a keypoint outside the workspace, and a consumer that
- * stops draining the ring until it is full. The count over the window must be exactly 0.
- *
- * That the count can fail is checked first: mallocs, a free and a write made inside a
- * window, from this file and from inside nd_core, are all seen.
- *
- * Under ASan (build-asan runs label unit too) the count works the same: ASan replaces
- * malloc by interposing its own at run time, behind the symbol the wrappers reach as
- * __real_malloc; the link-time rewrite of the callers is untouched, so every call from
- * the code under test still passes through a wrapper first. The self-check runs there as
- * well and proves it.
- *
- * What --wrap cannot see: allocations made inside shared libraries (libc itself, e.g. a
- * printf with a huge field width). The cycle's libc calls are memcpy, memset, math and,
- * for a refused plan, snprintf of short numbers; the stdio calls that could allocate are
- * the blocking ones, counted here. */
+ * One window spans 100k+ cycles on synthetic time, through the first robot state, plan
+ * switches at 20 Hz, plans stretched by the limits and plans refused by them, a stale plan
+ * (brake, hold), a stale robot state (brake, hold, plans kept waiting), plans refused for
+ * a keypoint outside the workspace, and a consumer that stops draining the ring until it
+ * is full. The count over the window must be exactly 0. That the count can fail is checked
+ * first: mallocs, a free and a write made inside a window, from this file and from inside
+ * nd_core, are all seen. */
 #define _GNU_SOURCE
 #include <errno.h>
 #include <fcntl.h>
@@ -38,186 +22,14 @@
 #include <unistd.h>
 
 #include "nd_test.h"
+#include "rt_count.h"
 #include "nd_exec.h"
 #include "nd_math.h"
 #include "nd_rng.h"
 #include "nd_rollout.h"
 #include "exec_loop.h"
+#include "nd_rtloop.h"
 #include "nudge/nudge_ee_cmd_t.h"
-
-/* ---- the counting wrappers ------------------------------------------------------------ */
-
-enum {
-  C_MALLOC, C_CALLOC, C_REALLOC, C_REALLOCARRAY, C_FREE, C_POSIX_MEMALIGN, C_ALIGNED_ALLOC,
-  C_MEMALIGN, C_VALLOC, C_STRDUP, C_STRNDUP, N_ALLOC_FN,
-  C_WRITE = N_ALLOC_FN, C_READ, C_PRINTF, C_FPRINTF, C_VPRINTF, C_VFPRINTF, C_PUTS, C_FPUTS,
-  C_FWRITE, C_PUTCHAR, C_FPUTC, C_FFLUSH, C_POLL, C_NANOSLEEP, C_CLOCK_NANOSLEEP, C_USLEEP,
-  C_SLEEP, C_MUTEX_LOCK, C_COND_WAIT, C_COND_TIMEDWAIT, C_FSYNC, C_FDATASYNC, C_LCM_PUBLISH,
-  N_FN
-};
-
-static const char *const fn_name[N_FN] = {
-    "malloc", "calloc", "realloc", "reallocarray", "free", "posix_memalign",
-    "aligned_alloc", "memalign", "valloc", "strdup", "strndup", "write", "read", "printf",
-    "fprintf", "vprintf", "vfprintf", "puts", "fputs", "fwrite", "putchar", "fputc",
-    "fflush", "poll", "nanosleep", "clock_nanosleep", "usleep", "sleep",
-    "pthread_mutex_lock", "pthread_cond_wait", "pthread_cond_timedwait", "fsync",
-    "fdatasync", "lcm_publish"};
-
-/* Single-threaded test: plain ints. */
-static int g_window;
-static long g_count[N_FN];
-
-static void tally(int fn) {
-  if (g_window) g_count[fn]++;
-}
-
-static void window_open(void) {
-  memset(g_count, 0, sizeof g_count);
-  g_window = 1;
-}
-
-static void window_close(void) { g_window = 0; }
-
-static long window_sum(int from, int to) {
-  long n = 0;
-  for (int i = from; i < to; i++) n += g_count[i];
-  return n;
-}
-
-/* "malloc 2, free 1" for the functions counted in [from, to). */
-static void window_list(char *out, size_t cap, int from, int to) {
-  size_t k = 0;
-  out[0] = '\0';
-  for (int i = from; i < to && k < cap; i++)
-    if (g_count[i])
-      k += (size_t)snprintf(out + k, cap - k, "%s%s %ld", k ? ", " : "", fn_name[i],
-                            g_count[i]);
-}
-
-void *__real_malloc(size_t n);
-void *__real_calloc(size_t n, size_t size);
-void *__real_realloc(void *p, size_t n);
-void *__real_reallocarray(void *p, size_t n, size_t size);
-void __real_free(void *p);
-int __real_posix_memalign(void **p, size_t align, size_t n);
-void *__real_aligned_alloc(size_t align, size_t n);
-void *__real_memalign(size_t align, size_t n);
-void *__real_valloc(size_t n);
-char *__real_strdup(const char *s);
-char *__real_strndup(const char *s, size_t n);
-
-void *__wrap_malloc(size_t n) { tally(C_MALLOC); return __real_malloc(n); }
-void *__wrap_calloc(size_t n, size_t size) { tally(C_CALLOC); return __real_calloc(n, size); }
-void *__wrap_realloc(void *p, size_t n) { tally(C_REALLOC); return __real_realloc(p, n); }
-void *__wrap_reallocarray(void *p, size_t n, size_t size) {
-  tally(C_REALLOCARRAY);
-  return __real_reallocarray(p, n, size);
-}
-void __wrap_free(void *p) { tally(C_FREE); __real_free(p); }
-int __wrap_posix_memalign(void **p, size_t align, size_t n) {
-  tally(C_POSIX_MEMALIGN);
-  return __real_posix_memalign(p, align, n);
-}
-void *__wrap_aligned_alloc(size_t align, size_t n) {
-  tally(C_ALIGNED_ALLOC);
-  return __real_aligned_alloc(align, n);
-}
-void *__wrap_memalign(size_t align, size_t n) { tally(C_MEMALIGN); return __real_memalign(align, n); }
-void *__wrap_valloc(size_t n) { tally(C_VALLOC); return __real_valloc(n); }
-char *__wrap_strdup(const char *s) { tally(C_STRDUP); return __real_strdup(s); }
-char *__wrap_strndup(const char *s, size_t n) { tally(C_STRNDUP); return __real_strndup(s, n); }
-
-ssize_t __real_write(int fd, const void *b, size_t n);
-ssize_t __real_read(int fd, void *b, size_t n);
-int __real_vprintf(const char *fmt, va_list ap);
-int __real_vfprintf(FILE *f, const char *fmt, va_list ap);
-int __real_puts(const char *s);
-int __real_fputs(const char *s, FILE *f);
-size_t __real_fwrite(const void *p, size_t size, size_t n, FILE *f);
-int __real_putchar(int c);
-int __real_fputc(int c, FILE *f);
-int __real_fflush(FILE *f);
-int __real_poll(struct pollfd *fds, nfds_t n, int timeout);
-int __real_nanosleep(const struct timespec *req, struct timespec *rem);
-int __real_clock_nanosleep(clockid_t c, int flags, const struct timespec *req,
-                           struct timespec *rem);
-int __real_usleep(useconds_t us);
-unsigned __real_sleep(unsigned s);
-int __real_pthread_mutex_lock(pthread_mutex_t *m);
-int __real_pthread_cond_wait(pthread_cond_t *c, pthread_mutex_t *m);
-int __real_pthread_cond_timedwait(pthread_cond_t *c, pthread_mutex_t *m,
-                                  const struct timespec *t);
-int __real_fsync(int fd);
-int __real_fdatasync(int fd);
-int __real_lcm_publish(lcm_t *lcm, const char *ch, const void *data, unsigned int len);
-
-ssize_t __wrap_write(int fd, const void *b, size_t n) { tally(C_WRITE); return __real_write(fd, b, n); }
-ssize_t __wrap_read(int fd, void *b, size_t n) { tally(C_READ); return __real_read(fd, b, n); }
-int __wrap_vprintf(const char *fmt, va_list ap) { tally(C_VPRINTF); return __real_vprintf(fmt, ap); }
-int __wrap_vfprintf(FILE *f, const char *fmt, va_list ap) {
-  tally(C_VFPRINTF);
-  return __real_vfprintf(f, fmt, ap);
-}
-int __wrap_printf(const char *fmt, ...) {
-  tally(C_PRINTF);
-  va_list ap;
-  va_start(ap, fmt);
-  const int r = __real_vprintf(fmt, ap);
-  va_end(ap);
-  return r;
-}
-int __wrap_fprintf(FILE *f, const char *fmt, ...) {
-  tally(C_FPRINTF);
-  va_list ap;
-  va_start(ap, fmt);
-  const int r = __real_vfprintf(f, fmt, ap);
-  va_end(ap);
-  return r;
-}
-int __wrap_puts(const char *s) { tally(C_PUTS); return __real_puts(s); }
-int __wrap_fputs(const char *s, FILE *f) { tally(C_FPUTS); return __real_fputs(s, f); }
-size_t __wrap_fwrite(const void *p, size_t size, size_t n, FILE *f) {
-  tally(C_FWRITE);
-  return __real_fwrite(p, size, n, f);
-}
-int __wrap_putchar(int c) { tally(C_PUTCHAR); return __real_putchar(c); }
-int __wrap_fputc(int c, FILE *f) { tally(C_FPUTC); return __real_fputc(c, f); }
-int __wrap_fflush(FILE *f) { tally(C_FFLUSH); return __real_fflush(f); }
-int __wrap_poll(struct pollfd *fds, nfds_t n, int timeout) {
-  tally(C_POLL);
-  return __real_poll(fds, n, timeout);
-}
-int __wrap_nanosleep(const struct timespec *req, struct timespec *rem) {
-  tally(C_NANOSLEEP);
-  return __real_nanosleep(req, rem);
-}
-int __wrap_clock_nanosleep(clockid_t c, int flags, const struct timespec *req,
-                           struct timespec *rem) {
-  tally(C_CLOCK_NANOSLEEP);
-  return __real_clock_nanosleep(c, flags, req, rem);
-}
-int __wrap_usleep(useconds_t us) { tally(C_USLEEP); return __real_usleep(us); }
-unsigned __wrap_sleep(unsigned s) { tally(C_SLEEP); return __real_sleep(s); }
-int __wrap_pthread_mutex_lock(pthread_mutex_t *m) {
-  tally(C_MUTEX_LOCK);
-  return __real_pthread_mutex_lock(m);
-}
-int __wrap_pthread_cond_wait(pthread_cond_t *c, pthread_mutex_t *m) {
-  tally(C_COND_WAIT);
-  return __real_pthread_cond_wait(c, m);
-}
-int __wrap_pthread_cond_timedwait(pthread_cond_t *c, pthread_mutex_t *m,
-                                  const struct timespec *t) {
-  tally(C_COND_TIMEDWAIT);
-  return __real_pthread_cond_timedwait(c, m, t);
-}
-int __wrap_fsync(int fd) { tally(C_FSYNC); return __real_fsync(fd); }
-int __wrap_fdatasync(int fd) { tally(C_FDATASYNC); return __real_fdatasync(fd); }
-int __wrap_lcm_publish(lcm_t *lcm, const char *ch, const void *data, unsigned int len) {
-  tally(C_LCM_PUBLISH);
-  return __real_lcm_publish(lcm, ch, data, len);
-}
 
 /* ---- the counter sees what it should ---------------------------------------------------- */
 
@@ -743,8 +555,84 @@ static void test_workspace_plans(void **state) {
   assert_int_equal(g_loop.rep.mode, ND_EXEC_HOLD);
 }
 
+/* ---- nd_rtloop's schedule on synthetic time ---------------------------------------------- */
+
+typedef struct {
+  int calls, extra;          /* cycles, of which catching up */
+  double first_deadline, last_deadline;
+  int64_t last_utime;
+} tick_log;
+
+static void log_tick(void *ctx, const nd_rtloop_tick *t) {
+  tick_log *g = ctx;
+  if (!g->calls) g->first_deadline = t->deadline;
+  g->calls++;
+  g->extra += t->catching_up;
+  g->last_deadline = t->deadline;
+  g->last_utime = t->utime;
+}
+
+/* One wake-up of a 1 kHz loop, late_ms after its deadline; returns the log of the cycles. */
+static tick_log wake(nd_rtloop *l, int64_t *next, double late_ms) {
+  tick_log g = {0};
+  l->ctx = &g;
+  const int64_t now = *next + (int64_t)(late_ms * 1e6);
+  nd_rtloop_wake(l, next, now, 5000000000LL + now / 1000);
+  return g;
+}
+
+/* SKIP runs one cycle per wake-up, for the newest deadline due, and counts the rest as
+ * skipped; CATCH_UP runs one per deadline up to its maximum, oldest first, and counts what
+ * is beyond. Both advance the schedule past every deadline served, allocating nothing. */
+static void test_loop_policies(void **state) {
+  (void)state;
+  static nd_rtloop l;
+  for (int policy = ND_RT_SKIP; policy <= ND_RT_CATCH_UP; policy++) {
+    memset(&l, 0, sizeof l);
+    nd_rtloop_cfg_default(&l.cfg);
+    l.cfg.policy = policy;
+    l.cfg.catch_up_max = 20;
+    l.fn = log_tick;
+    nd_mailbox_init(&l.stats);
+    nd_jitter_reset(&l.jit);
+    int64_t next = 1000000000LL;  /* 1 s */
+    window_open();
+    tick_log on_time = wake(&l, &next, 0.05);
+    const int64_t after_on_time = next;
+    tick_log late5 = wake(&l, &next, 4.5);      /* 4 deadlines passed besides this one */
+    const int64_t after_late5 = next;
+    tick_log stall = wake(&l, &next, 99.5);     /* a 100 ms stall: 100 deadlines due */
+    for (int k = 0; k < 1000; k++) wake(&l, &next, 0.01);
+    window_close();
+    assert_int_equal(window_sum(0, N_FN), 0);
+    assert_int_equal(on_time.calls, 1);
+    assert_int_equal(after_on_time, 1000000000LL + 1000000);
+    assert_int_equal(after_late5, after_on_time + 5 * 1000000);
+    if (policy == ND_RT_SKIP) {
+      assert_int_equal(late5.calls, 1);
+      assert_near(late5.last_deadline, 1.001 + 0.004, 1e-12);  /* the newest due */
+      assert_int_equal(stall.calls, 1);
+      assert_int_equal(l.st.skipped, 4 + 99);
+    } else {
+      assert_int_equal(late5.calls, 5);
+      assert_int_equal(late5.extra, 4);
+      assert_near(late5.first_deadline, 1.001, 1e-12);
+      assert_near(late5.last_deadline, 1.005, 1e-12);
+      assert_int_equal(stall.calls, 20);
+      assert_int_equal(l.st.skipped, 80);
+      /* The cycles served are the newest 20, each stamped with its own deadline's time. */
+      assert_near(stall.last_deadline - stall.first_deadline, 0.019, 1e-9);
+    }
+    assert_int_equal(l.jit.overruns, 2);
+    printf("rtloop_policy_%s cycles %lld, skipped %lld, overruns %lld\n",
+           policy == ND_RT_SKIP ? "skip" : "catch_up", (long long)l.st.cycles,
+           (long long)l.st.skipped, (long long)l.jit.overruns);
+  }
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_loop_policies),
       cmocka_unit_test(test_counter_sees_calls),
       cmocka_unit_test(test_cycle_allocates_nothing),
       cmocka_unit_test(test_resent_plan_after_restart),

@@ -1,0 +1,136 @@
+/* test_bridge_loop: the bridge's 1 kHz step (processes/bridge/bridge_loop.c), run through
+ * nd_rtloop's schedule on synthetic time, allocates nothing and makes no blocking call
+ * (counted by rt_count.h's wrappers), and does what the bridge promises: hold until the
+ * first command, track fresh commands, hold where the sphere was when they go stale, one
+ * ROBOT_STATE per step with consecutive seq, MOCAP at 240 Hz stamped with its capture time,
+ * and every deadline of a catch-up wake-up stepped. */
+#define _GNU_SOURCE
+#include "nd_test.h"
+#include "rt_count.h"
+
+#include "bridge_loop.h"
+#include "nd_rtloop.h"
+#include "nudge/nudge_mocap_t.h"
+#include "nudge/nudge_robot_state_t.h"
+
+#define T0 1000.0              /* s, the synthetic monotonic clock's start */
+#define U0 1795496793000000LL  /* us, its wall-clock time */
+
+static bridge_loop g_b;
+static nd_rtloop g_l;
+
+typedef struct {
+  long states, frames, seq_gaps, late_frames;
+  int64_t last_seq, last_frame_us, last_state_us;
+  double ee[2];
+  int mode;
+} drained;
+
+/* Pop everything the loop encoded, checking what can be checked per message. */
+static void drain(drained *d) {
+  unsigned char buf[ND_RTIO_MAX];
+  int tag, n;
+  while ((n = nd_ring_pop(&g_b.out, &tag, buf, sizeof buf)) >= 0) {
+    if (tag == BRIDGE_TAG_ROBOT_STATE) {
+      nudge_robot_state_t m;
+      assert_int_equal(nudge_robot_state_t_decode(buf, 0, n, &m), n);
+      if (d->states && m.seq != d->last_seq + 1) d->seq_gaps++;
+      d->last_seq = m.seq;
+      d->last_state_us = m.utime;
+      d->ee[0] = m.ee_pos[0], d->ee[1] = m.ee_pos[1];
+      d->mode = m.mode;
+      d->states++;
+    } else {
+      nudge_mocap_t m;
+      assert_int_equal(nudge_mocap_t_decode(buf, 0, n, &m), n);
+      /* The ideal world's capture has no latency: a frame is stamped with its step's time. */
+      d->late_frames += m.utime != d->last_state_us;
+      d->last_frame_us = m.utime;
+      d->frames++;
+    }
+  }
+}
+
+static void post_cmd(double now, double x, double y) {
+  bridge_cmd c = {{x, y}, {0, 0}, {0, 0}, now, 0};
+  nd_mailbox_post(&g_b.cmd, &c, sizeof c);
+}
+
+static void test_step_allocates_nothing(void **state) {
+  (void)state;
+  char err[256];
+  nds_world_cfg wc;
+  nds_world_cfg_default(&wc);
+  nds_world *w = nds_world_create(&wc, err, sizeof err);
+  if (!w) fail_msg("%s", err);
+  bridge_loop_init(&g_b, w, 0.1);
+  memset(&g_l, 0, sizeof g_l);
+  nd_rtloop_cfg_default(&g_l.cfg);
+  g_l.cfg.policy = ND_RT_CATCH_UP;
+  g_l.fn = bridge_loop_tick;
+  g_l.ctx = &g_b;
+  nd_mailbox_init(&g_l.stats);
+  nd_jitter_reset(&g_l.jit);
+
+  enum { STEPS = 100000, TRACK = 1000, STALE = 4000, BACK = 6000, FULL = 9000 };
+  drained d = {0};
+  int64_t next = (int64_t)(T0 * 1e9);
+  double x = -0.10, y = 0.0;
+  long held_still = 0, tracked = 0;
+  window_open();
+  for (long k = 0; k < STEPS;) {
+    const double now = T0 + 1e-3 * (double)k;
+    /* Commands from TRACK to STALE and again from BACK: a slow circle of 5 cm. */
+    if ((k >= TRACK && k < STALE) || k >= BACK) {
+      x = -0.10 + 0.05 * sin(1e-3 * (double)k);
+      y = 0.05 * (1 - cos(1e-3 * (double)k));
+      post_cmd(now, x, y);
+    }
+    /* Every 997th wake-up comes 7.5 ms late: the loop catches up step by step. */
+    const double late = k % 997 == 0 ? 7.5e-3 : 2e-5;
+    const int64_t now_ns = next + (int64_t)(late * 1e9);
+    nd_rtloop_wake(&g_l, &next, now_ns, U0 + (now_ns - (int64_t)(T0 * 1e9)) / 1000);
+    k = (long)llround(((double)next * 1e-9 - T0) * 1e3);
+    if (k >= FULL && k < FULL + 400) continue;  /* the consumer stalls: the ring fills */
+    drain(&d);
+    /* Holding: at the sphere's place when commands went stale, once it has settled. */
+    if (k > STALE + 1200 && k < BACK) held_still += hypot(d.ee[0] - g_b.hold[0], d.ee[1] - g_b.hold[1]) < 1e-3;
+    if (k > TRACK + 500 && k < STALE) tracked += hypot(d.ee[0] - x, d.ee[1] - y) < 0.01;
+  }
+  window_close();
+  char seen[256];
+  window_list(seen, sizeof seen, 0, N_FN);
+  const long n_calls = window_sum(0, N_FN);
+  printf("bridge_loop_calls %ld count (%s)\n", n_calls, seen);
+  printf("bridge_loop_steps %lld count, robot states %ld, frames %ld, ring drops %llu\n",
+         (long long)g_b.rep.steps, d.states, d.frames,
+         (unsigned long long)atomic_load(&g_b.out.dropped));
+  assert_int_equal(n_calls, 0);
+  /* Every deadline stepped (the late wake-ups caught up), one state per step. */
+  assert_int_equal(g_b.rep.steps, g_l.st.cycles);
+  assert_true(g_b.rep.steps >= STEPS);
+  assert_int_equal(g_l.st.skipped, 0);
+  assert_int_equal(g_b.rs_seq, g_b.rep.steps);
+  /* The stalled consumer lost messages only to the full ring (every step's state and
+   * every frame is either encoded or counted as a drop), and those show as seq gaps. */
+  const int64_t lost = (g_b.rs_seq - g_b.rep.robot_states) + (g_b.mc_seq - g_b.rep.frames);
+  assert_true(lost > 0);
+  assert_int_equal(lost, (int64_t)atomic_load(&g_b.out.dropped));
+  assert_true(d.seq_gaps >= 1);
+  /* MOCAP at 240 Hz of the 1 kHz steps, each stamped with its step's time. */
+  assert_near((double)g_b.mc_seq / (double)g_b.rep.steps, 0.24, 1e-3);
+  assert_int_equal(d.late_frames, 0);
+  /* Tracking while fresh, holding when stale, tracking again. */
+  assert_true(tracked > (STALE - TRACK - 500) * 0.95);
+  assert_true(held_still > (BACK - STALE - 1200) * 0.95);
+  assert_int_equal(g_b.rep.hold_events, 1);  /* when commands went stale */
+  assert_int_equal(g_b.holding, 0);
+  nds_world_free(w);
+}
+
+int main(void) {
+  const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_step_allocates_nothing),
+  };
+  return cmocka_run_group_tests(tests, NULL, NULL);
+}
