@@ -16,6 +16,8 @@
 #include <stdint.h>
 #include <stdio.h>
 
+#include "nd_parse.h" /* nd_box, the destination of ND_OPT_BOX */
+
 typedef enum {
   ND_OPT_FLAG = 0, /* no value: *(int *)dst = 1 */
   ND_OPT_INT,      /* decimal integer in [lo, hi]: int */

@@ -1,6 +1,7 @@
 /* adapter: what the files of nudge-adapter share.
  *
- *   main.c    options and wiring: the model, the fit, the history, the loop
+ *   main.c    wiring: the model, the fit, the history, the loop
+ *   options.c the command line and the fit's configuration
  *   watch.c   the replay buffer: reading what was appended, skipping bad records
  *   fitter.c  the fit thread: one nds_fit_run per job
  *   params.c  a finished fit: the next version, the history, PARAMS
@@ -93,6 +94,10 @@ typedef struct {
   nd_rfile_writer hist;
   double next_params;
 } adapter;
+
+/* options.c: parse argv into o and the fit's configuration fc. ND_OPT_RUN, or the exit
+ * status (usage or refusal printed). */
+int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc);
 
 /* watch.c */
 void adapter_poll(adapter *a);            /* read what was appended (no fit running) */

@@ -1,11 +1,11 @@
-/* bridge_io: nudge-bridge's I/O thread: EE_CMD in (validated, checked against the
+/* bridge_io: nudge-bridge's I/O thread and command line (bridge_opts.c): EE_CMD in (validated, checked against the
  * workspace, posted to the loop), ROBOT_STATE and MOCAP out (what the loop left in its
  * ring), and the loop's reports turned into log lines and the heartbeat. */
 #ifndef BRIDGE_IO_H
 #define BRIDGE_IO_H
 
 #include "bridge_loop.h"
-#include "nd_parse.h"
+#include "nd_opt.h"
 #include "ndp.h"
 
 /* How far beyond its workspace box an EE_CMD position may lie. The executor keeps its
@@ -27,6 +27,21 @@ typedef struct {
   int64_t resets_said, skipped_said;
   double reset_said_at, skip_said_at;
 } bridge_io;
+
+/* The command line. */
+typedef struct {
+  nds_world_cfg wc;         /* the world */
+  nd_rtloop_cfg rt;         /* rate and real-time set-up */
+  nd_box ws;                /* workspace box */
+  double cmd_timeout;       /* s */
+  double seconds;           /* run time; 0: until signalled */
+  const char *url;
+  nd_opt_spec spec;         /* for refusals after parsing (nd_opt_fail); no table */
+} bridge_opts;
+
+/* Parse argv into o (bridge_opts.c). ND_OPT_RUN, or the exit status (usage or refusal
+ * printed). */
+int bridge_options(int argc, char **argv, bridge_opts *o);
 
 /* Subscribe EE_CMD. Return 0, or -1 with a message. */
 int bridge_io_subscribe(bridge_io *io, lcm_t *lcm, char *err, int errlen);

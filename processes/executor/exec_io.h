@@ -1,10 +1,11 @@
-/* exec_io: nudge-executor's I/O thread: LCM in (ROBOT_STATE, PLAN validated and posted to
+/* exec_io: nudge-executor's I/O thread and command line (exec_opts.c): LCM in (ROBOT_STATE, PLAN validated and posted to
  * the loop's mailboxes), EE_CMD out (what the loop left in its ring), and what the loop
  * reports turned into log lines and the heartbeat. */
 #ifndef EXEC_IO_H
 #define EXEC_IO_H
 
 #include "exec_loop.h"
+#include "nd_opt.h"
 #include "ndp.h"
 
 typedef struct {
@@ -17,6 +18,18 @@ typedef struct {
   ndp_ratelog log_old;                        /* plans made from a state too old */
   exec_loop_report last;                      /* the report taken last */
 } exec_io;
+
+/* The command line. */
+typedef struct {
+  nd_exec_cfg cfg;      /* limits and workspace */
+  nd_rtloop_cfg rt;     /* rate and real-time set-up */
+  double timeout;       /* s: inputs older than this are stale */
+  const char *url;
+} exec_opts;
+
+/* Parse argv into o (exec_opts.c). ND_OPT_RUN, or the exit status (usage or refusal
+ * printed). */
+int exec_options(int argc, char **argv, exec_opts *o);
 
 /* Subscribe ROBOT_STATE and PLAN for io on lcm. Return 0, or -1 with a message. */
 int exec_io_subscribe(exec_io *io, lcm_t *lcm, char *err, int errlen);

@@ -16,7 +16,6 @@
 
 #include "exec_io.h"
 #include "nd_opt.h"
-#include "nd_parse.h"
 
 #define PROG "nudge-executor"
 
@@ -41,47 +40,14 @@ int main(int argc, char **argv) {
   static exec_rt rt;
   static exec_io io;
   static nd_rtloop loop;
-  nd_exec_cfg cfg = nd_exec_cfg_default();
-  nd_box ws = {{cfg.ws_lo[0], cfg.ws_lo[1]}, {cfg.ws_hi[0], cfg.ws_hi[1]}};
-  nd_rtloop_cfg rc;
-  nd_rtloop_cfg_default(&rc);
-  double timeout = 0.1;
-  int no_rt = 0;
-  const char *url = NULL;
-  char ws_help[300];
-  snprintf(ws_help, sizeof ws_help,
-           "box in metres every keypoint of a PLAN must lie in; a plan with one outside, or "
-           "whose segment or brake to rest would leave the box by more than %g m, is refused "
-           "and counted (nudge-planner's keypoint box; nudge-up --workspace gives the planner, "
-           "executor and bridge one box)", cfg.ws_margin);
-  nd_opt opts[] = {
-      {"rate", ND_OPT_DOUBLE, &rc.rate, 1.0, 10000.0, .arg = "HZ", .help = "loop rate"},
-      {"timeout", ND_OPT_DOUBLE, &timeout, 1e-3, 60.0, .arg = "S",
-       .help = "inputs older than this are stale; age counts from the message's utime, so "
-               "hosts need synced clocks"},
-      {"v-max", ND_OPT_DOUBLE, &cfg.v_max, 1e-3, 10.0, .arg = "M/S", .help = "speed limit"},
-      {"a-max", ND_OPT_DOUBLE, &cfg.a_max, 1e-3, 1000.0, .arg = "M/S2",
-       .help = "acceleration limit"},
-      {"j-max", ND_OPT_DOUBLE, &cfg.j_max, 1e-3, 1e6, .arg = "M/S3", .help = "jerk limit"},
-      {"workspace", ND_OPT_BOX, &ws, .help = ws_help},
-      {"lcm-url", ND_OPT_STRING, &url, .arg = "URL", .def = "$LCM_DEFAULT_URL, else " NDP_DEFAULT_URL,
-       .help = "LCM URL"},
-      {"no-rt", ND_OPT_FLAG, &no_rt, .help = "do not ask for SCHED_FIFO and mlockall"},
-  };
-  nd_opt_spec spec = {PROG, "[options]",
-                      "Follow the newest PLAN's first keypoint with a minimum-snap segment and "
-                      "publish the end-effector setpoint (p, v, a) on EE_CMD at a fixed rate. "
-                      "Publishes nothing until the first ROBOT_STATE; brakes to rest and holds "
-                      "while PLAN or ROBOT_STATE is stale; a fresh plan resumes.",
-                      "Subscribes PLAN, ROBOT_STATE; publishes EE_CMD, STATUS (1 Hz).\n", opts,
-                      sizeof(opts) / sizeof(opts[0])};
-  int st = nd_opt_parse(&spec, argc, argv);
+  exec_opts o = {0};
+  const int st = exec_options(argc, argv, &o);
   if (st != ND_OPT_RUN) return st;
-  for (int k = 0; k < 2; k++) cfg.ws_lo[k] = ws.lo[k], cfg.ws_hi[k] = ws.hi[k];
+  const nd_exec_cfg cfg = o.cfg;
+  const nd_rtloop_cfg rc = o.rt;
+  const double timeout = o.timeout;
+  const char *url = o.url;
   char err[512];
-  if (nd_exec_cfg_check(&cfg, err, sizeof err)) return nd_opt_fail(&spec, "%s", err);
-  if (no_rt) rc.priority = rc.io_priority = rc.lock_memory = 0;
-
   ndp_signals();
   lcm_t *lcm = ndp_lcm_create(url, err, sizeof err);
   if (!lcm) {

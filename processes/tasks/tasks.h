@@ -1,6 +1,7 @@
 /* tasks: what the files of nudge-tasks, the episode runner, share.
  *
- *   main.c    options, the goal chain, the summary
+ *   main.c    wiring: the tasks one after another, the summary
+ *   options.c the command line and the default goal chain
  *   inputs.c  the channels: MOCAP for the terminal condition, and with --record the
  *             robot's and executor's streams and PARAMS
  *   run.c     one task: TASK out, the object followed to the terminal condition, EPISODE
@@ -85,6 +86,10 @@ typedef struct {
   double yaw_err;    /* rad, modulo the cuboid's half-turn, in [0, pi/2] */
   char reason[200];
 } tasks_result;
+
+/* options.c: parse argv into c. ND_OPT_RUN, or the exit status (usage or refusal
+ * printed). */
+int tasks_options(int argc, char **argv, tasks_cfg *c);
 
 /* inputs.c: subscribe MOCAP, and with io->buf the recording's channels. 0 or -1. */
 int tasks_subscribe(tasks_io *io, lcm_t *lcm, char *err, int errlen);

@@ -1,0 +1,102 @@
+/* options: nudge-adapter's command line, and the fit's configuration from it (adapter.h). */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "adapter.h"
+#include "nd_opt.h"
+
+static const char *const mode_words[] = {"force", "velocity", "setpoint", NULL};
+
+static int parse_fit(const char *v, const char *what, void *dst, char *err, int errlen) {
+  return nd_theta_parse_mask(v, what, dst, err, errlen);
+}
+
+int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
+  const char *history = NULL;
+  nds_fit_cfg_default(fc);
+  o->threads = ndp_default_threads();
+  o->fit = 1u << ND_TH_SLIDE | 1u << ND_TH_TORSION | 1u << ND_TH_ROLL;
+  memcpy(o->theta, nd_theta_true, sizeof(o->theta));
+  memcpy(o->ref, nd_theta_true, sizeof(o->ref));
+  o->D = 1.0, o->seed = 1, o->nice = 10;
+  /* Two record steps per model step: 3.5x faster than 1 ms, and re-anchoring keeps the
+   * coarse step's error from compounding (doc/decisions.md). */
+  o->replay_dt = 0.002;
+  o->replay_mode = fc->replay.mode;
+  o->replay_window = NDS_FIT_WINDOW_MOCAP;
+  nd_opt opts[] = {
+      {"buffer", ND_OPT_STRING, &o->buffer, .arg = "FILE",
+       .help = "replay buffer to watch (need not exist yet)"},
+      {"history", ND_OPT_STRING, &history, .arg = "FILE", .def = "<buffer>.history",
+       .help = "parameter history"},
+      {"fit", ND_OPT_CUSTOM, &o->fit, .parse = parse_fit, .arg = "LIST", .def = "slide,torsion,roll",
+       .help = "fitted parameters, comma-separated from slide, torsion, roll, mass; the others "
+               "are held at --theta"},
+      {"theta", ND_OPT_THETA, o->theta, .def = "the simulation's ground truth",
+       .help = "prior mean: sliding, torsional, rolling friction, sphere mass in kg (give the "
+               "planner's --theta to start the loop from a wrong model)"},
+      {"prior-d", ND_OPT_DOUBLE, &o->D, 0.01, 10.0, .arg = "D",
+       .help = "prior std per parameter (r + D r - max(1e-7, r - D r)) / 16, the paper's "
+               "formula, with r the nominal theta of --prior-ref"},
+      {"prior-ref", ND_OPT_THETA, o->ref, .def = "the simulation's ground truth",
+       .help = "nominal theta that sizes the prior std; not --theta: a wrong mean must not "
+               "also shrink the std (0.3 instead of 1 would give the truth a 19-std distance "
+               "instead of 5.6)"},
+      {"threads", ND_OPT_INT, &o->threads, 1, 256,
+       .def = "cores - 1 up to 4 cores, cores - 2 above, at least 1", .help = "replay workers"},
+      {"nice", ND_OPT_INT, &o->nice, 0, 19,
+       .help = "scheduling niceness of the whole process: on a small machine refits must not "
+               "slow the planner"},
+      {"replay-dt", ND_OPT_DOUBLE, &o->replay_dt, 1e-4, 0.01, .arg = "S",
+       .help = "model timestep of the replays, a whole multiple of the recorded dt"},
+      {"replay-mode", ND_OPT_CHOICE, &o->replay_mode, .choices = mode_words, .arg = "MODE",
+       .help = "force, velocity or setpoint: how rollouts are replayed (sim/nds_replay.h)"},
+      {"replay-window", ND_OPT_DOUBLE, &o->replay_window, 0, 60, .arg = "S",
+       .help = "re-anchor each replay on the observed pose every S s (for poses interpolated "
+               "from 240 Hz MOCAP; 0.005 for poses observed at every step, as the study's; 0: "
+               "one shot, the paper's)"},
+      {"robust", ND_OPT_DOUBLE, &o->robust, 0, 1, .arg = "S",
+       .help = "rank candidates by the replay windows' robust score of scale S m^2 (0: by L, "
+               "the paper's)"},
+      {"seed", ND_OPT_U64, &o->seed, .help = "CEM seed (a restart adds the history's version)"},
+      {"lcm-url", ND_OPT_STRING, &o->url, .arg = "URL", .def = "$LCM_DEFAULT_URL, else " NDP_DEFAULT_URL,
+       .help = "LCM URL"},
+  };
+  nd_opt_spec spec = {PROG, "--buffer FILE [options]",
+                      "Incremental adaptation: watches the replay buffer FILE (appended to by "
+                      "nudge-tasks --record); whenever it holds rollouts the last fit did not "
+                      "use, refits theta with CEM on all of them (Q 32, C 2, elite fraction "
+                      "0.2), publishes PARAMS (mean, std, loss, buffer size, version) and "
+                      "appends the fit to the parameter history. PARAMS is republished at 1 Hz. "
+                      "A restarted adapter goes on from its history: version numbers and the "
+                      "CEM distribution continue.",
+                      "stdout: one line per refit. Exit status: 0 after SIGINT/SIGTERM, 1 on a "
+                      "runtime failure\n(history locked by another adapter, unreadable), 2 on "
+                      "bad arguments.\n", opts, sizeof(opts) / sizeof(opts[0])};
+  int rc = nd_opt_parse(&spec, argc, argv);
+  if (rc != ND_OPT_RUN) return rc;
+  if (!o->buffer) return nd_opt_fail(&spec, "--buffer FILE is required");
+  const int n = history ? snprintf(o->history, sizeof(o->history), "%s", history)
+                        : snprintf(o->history, sizeof(o->history), "%s.history", o->buffer);
+  if (n < 0 || n >= (int)sizeof(o->history) || strlen(o->buffer) >= ND_RFILE_PATH_MAX)
+    return nd_opt_fail(&spec, "--buffer / --history: path too long");
+  for (int i = 0; i < ND_NTHETA; i++) {
+    /* The paper's width vanishes for a nominal value of 0. */
+    if ((o->fit >> i & 1) && !(o->ref[i] > 0.0))
+      return nd_opt_fail(&spec, "--prior-ref: %s is fitted, so its nominal value must be > 0",
+                         nd_theta_key[i]);
+    /* The paper sizes the std from the true theta and draws the mean around it; here the
+     * mean is given (--theta) and the nominal theta stands in for the truth. */
+    const double r = o->ref[i], D = o->D;
+    fc->fit[i] = o->fit >> i & 1;
+    fc->mu0[i] = o->theta[i];
+    fc->sigma0[i] = (r + D * r - fmax(fc->lower, r - D * r)) / 16;
+  }
+  fc->replay.mode = o->replay_mode;
+  fc->replay.window = o->replay_window;
+  fc->robust = o->robust;
+  fc->pop = 32, fc->iters = 2, fc->elite_frac = 0.2;
+  return ND_OPT_RUN;
+}
+
