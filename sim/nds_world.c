@@ -14,9 +14,7 @@ struct nds_world {
   nds_ctrl_cfg ctrl_cfg;
   nds_ctrl pid;
   nds_state init;           /* start (and reset) state */
-  double next_frame;        /* step index of the next motion-capture frame */
-  double steps_per_frame;
-  long steps;
+  nd_mocap mocap;
 };
 
 void nds_world_cfg_default(nds_world_cfg *cfg) {
@@ -25,7 +23,7 @@ void nds_world_cfg_default(nds_world_cfg *cfg) {
   cfg->dt = 0.001;
   memcpy(cfg->theta, nd_theta_true, sizeof(cfg->theta));
   cfg->ee[0] = -0.10;
-  cfg->mocap_hz = 240.0;
+  nd_mocap_cfg_exact(&cfg->mocap);
 }
 
 /* The sphere must start clear of the box, or the first contact throws the object. */
@@ -74,10 +72,11 @@ static int load(nds_world *w, char *err, int errlen) {
 }
 
 nds_world *nds_world_create(const nds_world_cfg *cfg, char *err, int errlen) {
-  if (!(cfg->dt >= 0 && cfg->dt <= 0.05) || !(cfg->mocap_hz > 0)) {
-    snprintf(err, errlen, "world: dt %g s, mocap %g Hz out of range", cfg->dt, cfg->mocap_hz);
+  if (!(cfg->dt >= 0 && cfg->dt <= 0.05)) {
+    snprintf(err, errlen, "world: dt %g s out of range", cfg->dt);
     return NULL;
   }
+  if (nd_mocap_cfg_check(&cfg->mocap, err, errlen)) return NULL;
   nds_world *w = calloc(1, sizeof(*w));
   if (!w) {
     snprintf(err, errlen, "out of memory for the world");
@@ -87,9 +86,9 @@ nds_world *nds_world_create(const nds_world_cfg *cfg, char *err, int errlen) {
   if (load(w, err, errlen)) goto fail;
   const double dt = w->nm.m->opt.timestep;
   w->cfg.dt = dt;
-  if (cfg->mocap_hz * dt > 1.0 + 1e-9) {
+  if (cfg->mocap.rate * dt > 1.0 + 1e-9) {
     snprintf(err, errlen, "motion capture at %g Hz exceeds the world's step rate %g Hz",
-             cfg->mocap_hz, 1.0 / dt);
+             cfg->mocap.rate, 1.0 / dt);
     goto fail;
   }
   if (check_start(&w->nm, cfg, err, errlen)) goto fail;
@@ -102,7 +101,8 @@ nds_world *nds_world_create(const nds_world_cfg *cfg, char *err, int errlen) {
   if (nds_state_set(&w->nm, w->d, &w->init, err, errlen)) goto fail;
   mj_forward(w->nm.m, w->d);
   nds_ctrl_reset(&w->pid);
-  w->steps_per_frame = 1.0 / (cfg->mocap_hz * dt);
+  /* The first frame is due at the first step's end; a frame is captured at a step's end. */
+  nd_mocap_init(&w->mocap, &cfg->mocap, w->d->time + dt);
   return w;
 fail:
   nds_world_free(w);
@@ -167,16 +167,15 @@ void nds_world_step(nds_world *w, const double sp[2][4], nds_world_out *out) {
   }
   r->ee_pos[2] = w->nm.ee_height;
 
-  out->nframes = 0;
-  if ((double)w->steps >= w->next_frame) {
-    w->next_frame += w->steps_per_frame;
-    nds_world_frame *fr = &out->frame[out->nframes++];
-    fr->capture_t = d->time;
-    memcpy(fr->obj_pos, s.obj_pos, sizeof(fr->obj_pos));
-    memcpy(fr->obj_quat, s.obj_quat, sizeof(fr->obj_quat));
-    fr->ee_pos[0] = s.ee_pos[0];
-    fr->ee_pos[1] = s.ee_pos[1];
-    fr->ee_pos[2] = w->nm.ee_height;
+  const double ee[3] = {s.ee_pos[0], s.ee_pos[1], w->nm.ee_height};
+  nd_mocap_capture(&w->mocap, d->time, s.obj_pos, s.obj_quat, ee);
+  nd_mocap_frame mf[NDS_WORLD_MAX_FRAMES];
+  out->nframes = nd_mocap_release(&w->mocap, d->time, mf, NDS_WORLD_MAX_FRAMES);
+  for (int i = 0; i < out->nframes; i++) {
+    nds_world_frame *fr = &out->frame[i];
+    fr->capture_t = mf[i].t_capture;
+    memcpy(fr->obj_pos, mf[i].obj_pos, sizeof(fr->obj_pos));
+    memcpy(fr->obj_quat, mf[i].obj_quat, sizeof(fr->obj_quat));
+    memcpy(fr->ee_pos, mf[i].ee_pos, sizeof(fr->ee_pos));
   }
-  w->steps++;
 }

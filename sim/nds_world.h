@@ -9,6 +9,7 @@
 #ifndef NDS_WORLD_H
 #define NDS_WORLD_H
 
+#include "nd_mocap.h"
 #include "nds_ctrl.h"
 #include "nds_model.h"
 #include "nds_state.h"
@@ -22,11 +23,11 @@ typedef struct {
   double obj[3];            /* start: object pose x, y, yaw (m, m, rad) */
   double ee[2];             /* start: sphere x, y (m) */
   const char *model_path;   /* ideal world: an MJCF file instead of the built-in scene */
-  double mocap_hz;          /* motion-capture frame rate */
+  nd_mocap_cfg mocap;       /* the motion capture: rate, noise, latency, drops */
 } nds_world_cfg;
 
 /* The ideal world at 1 ms with the true theta, the object at the origin, the sphere at
- * (-0.10, 0), motion capture at 240 Hz (the paper's). */
+ * (-0.10, 0), exact motion capture at 240 Hz (the paper's rate). */
 void nds_world_cfg_default(nds_world_cfg *cfg);
 
 /* What the robot reports after a step (its ROBOT_STATE). */

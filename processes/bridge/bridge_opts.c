@@ -30,7 +30,7 @@ int bridge_options(int argc, char **argv, bridge_opts *o) {
       {"rate", ND_OPT_DOUBLE, &o->rt.rate, 20.0, 10000.0, .arg = "HZ", .def = "1000, or the "
        "--model file's own timestep",
        .help = "world steps per second of real time; timestep 1/HZ"},
-      {"mocap-hz", ND_OPT_DOUBLE, &o->wc.mocap_hz, 1.0, 10000.0, .arg = "HZ", .help = "MOCAP rate"},
+      {"mocap-hz", ND_OPT_DOUBLE, &o->wc.mocap.rate, 1.0, 10000.0, .arg = "HZ", .help = "MOCAP rate"},
       {"cmd-timeout", ND_OPT_DOUBLE, &o->cmd_timeout, 1e-3, 60.0, .arg = "S",
        .help = "hold when the newest EE_CMD is older than S"},
       {"theta", ND_OPT_THETA, o->wc.theta,

@@ -60,7 +60,7 @@ int main(int argc, char **argv) {
           PROG ": emulation, world dt %.3g ms at %g Hz real time (%s), MOCAP %g Hz, EE_CMD "
                "timeout %g s, theta (%g, %g, %g, %g), object (%g, %g, %g), ee (%g, %g), "
                "workspace x [%g, %g] y [%g, %g] m (+%g m), model %s, LCM %s\n",
-          1e3 / rc.rate, rc.rate, how, wc.mocap_hz, cmd_timeout, wc.theta[0], wc.theta[1],
+          1e3 / rc.rate, rc.rate, how, wc.mocap.rate, cmd_timeout, wc.theta[0], wc.theta[1],
           wc.theta[2], wc.theta[3], wc.obj[0], wc.obj[1], wc.obj[2], wc.ee[0], wc.ee[1],
           ws.lo[0], ws.hi[0], ws.lo[1], ws.hi[1], BRIDGE_WS_MARGIN,
           wc.model_path ? wc.model_path : "built-in scene", ndp_url(url));
