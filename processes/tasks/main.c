@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "nd_opt.h"
+#include "nd_stats.h"
 #include "tasks.h"
 
 static tasks_cfg cfg; /* static: the goal list is large */
@@ -30,8 +31,11 @@ int main(int argc, char **argv) {
     io.buf = &buf;
   }
   const char *url = ndp_url(cfg.url);
-  int status = 1, ran = 0, reached = 0, attempted = 0;
-  double t_sum = 0.0, pos_sum = 0.0;
+  int status = 1, ran = 0, reached = 0, attempted = 0, stops = 0;
+  double t_sum = 0.0, pos_sum = 0.0, task_s = 0.0, obj_path = 0.0, ee_path = 0.0;
+  int64_t plans = 0;
+  static double reach_t[MAX_GOALS], ages[MAX_PLAN_AGES];
+  io.ages = ages;
   ndp_status_init(&io.st, PROG);
   io.st.state = "waiting";
   lcm_t *lcm = ndp_lcm_create(url, err, sizeof(err));
@@ -61,7 +65,12 @@ int main(int argc, char **argv) {
     const int rejected = r.event == NUDGE_EPISODE_T_EVENT_REJECTED;
     attempted += !rejected;
     pos_sum += rejected ? 0.0 : r.pos_err;
-    if (r.event == NUDGE_EPISODE_T_EVENT_SUCCESS) reached++, t_sum += r.time;
+    if (r.event == NUDGE_EPISODE_T_EVENT_SUCCESS) reach_t[reached++] = r.time, t_sum += r.time;
+    stops += r.event == NUDGE_EPISODE_T_EVENT_STOPPED;
+    task_s += rejected ? 0.0 : r.time;
+    plans += r.plans;
+    obj_path += r.obj_path;
+    ee_path += r.ee_path;
     if (i + 1 < cfg.n && tasks_pause(lcm, &io, &cfg, rejected, err, sizeof(err))) goto done;
   }
   io.st.state = "done";
@@ -69,8 +78,21 @@ int main(int argc, char **argv) {
 
   /* name value unit lines for scripts, then the line people read. */
   printf("tasks_run %d count\ntasks_reached %d count\n", ran, reached);
-  if (reached) printf("reach_time_mean %.3f s\n", t_sum / reached);
-  if (attempted) printf("final_pos_err_mean %.4f m\n", pos_sum / attempted);
+  if (reached) {
+    printf("reach_time_mean %.3f s\n", t_sum / reached);
+    printf("reach_time_median %.3f s\n", nd_stats_of(reach_t, reached).median);
+  }
+  if (attempted) {
+    printf("final_pos_err_mean %.4f m\n", pos_sum / attempted);
+    printf("object_path_mean %.3f m\nsphere_path_mean %.3f m\n", obj_path / attempted,
+           ee_path / attempted);
+  }
+  printf("reflex_stops %d count\n", stops);
+  if (task_s > 0) printf("plan_rate_hz %.1f Hz\n", (double)plans / task_s);
+  if (io.nages) {
+    printf("plan_age_ms_p50 %.1f ms\n", nd_quantile(ages, io.nages, 0.5));
+    printf("plan_age_ms_p99 %.1f ms\n", nd_quantile(ages, io.nages, 0.99));
+  }
   if (cfg.record)
     printf("tasks_recorded %lld count\ntasks_record_failed %lld count\n",
            (long long)buf.appended, (long long)buf.failed);

@@ -61,6 +61,16 @@ int tasks_wait_mocap(lcm_t *lcm, tasks_io *io, double wait, char *err, int errle
   return io->frames > 0 && (!io->buf || io->buf->have_rs);
 }
 
+const char *tasks_reflex_name(int reflex, int joint) {
+  static char buf[64];
+  static const char *what[] = {"none", "position", "velocity", "acceleration", "torque",
+                               "Cartesian velocity", "Cartesian acceleration", "Cartesian jerk"};
+  const char *w = reflex >= 0 && reflex < (int)(sizeof(what) / sizeof(what[0])) ? what[reflex] : "?";
+  if (reflex >= NUDGE_ROBOT_STATE_T_REFLEX_CART_VELOCITY || joint < 1) snprintf(buf, sizeof buf, "%s", w);
+  else snprintf(buf, sizeof buf, "joint %d %s", joint, w);
+  return buf;
+}
+
 /* Run goal g as task id: publish it, follow MOCAP to the terminal condition, publish the
  * outcome. 0 with r filled, or -1 with a message on an LCM failure. */
 int tasks_run(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, const nd_goal *g, int64_t id,
@@ -91,6 +101,8 @@ int tasks_run(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, const nd_goal *g, in
   t.eps = eps;
   t.time_limit = tau;
   if (io->buf) tasks_buffer_begin(io->buf, &io->last, id, &goal);
+  memset(&io->run, 0, sizeof(io->run));
+  io->run.id = id;
   const double t0 = ndp_mono();
   if (nudge_task_t_publish(lcm, NDP_CH_TASK, &t) != 0) goto fail;
   io->st.published++;
@@ -123,6 +135,10 @@ int tasks_run(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, const nd_goal *g, in
       s = ND_TASK_TIMEOUT;
     }
     if (s != ND_TASK_RUNNING) break;
+    if (io->run.stopped) {
+      r->time = now - t0;
+      break;
+    }
     if (!gap_warned && now - io->t_last > MOCAP_GAP_WARN) {
       fprintf(stderr, PROG ": no MOCAP frame for %.1f s during task %lld\n", now - io->t_last,
               (long long)id);
@@ -137,10 +153,17 @@ int tasks_run(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, const nd_goal *g, in
   }
 
   const double age = ndp_mono() - io->t_last;
+  r->plans = io->run.plans;
+  r->obj_path = io->run.obj_path;
+  r->ee_path = io->run.ee_path;
   if (r->interrupted) {
     r->event = NUDGE_EPISODE_T_EVENT_TIMEOUT;
     snprintf(r->reason, sizeof(r->reason), "interrupted: the runner was stopped at %.2f s",
              r->time);
+  } else if (io->run.stopped && s == ND_TASK_RUNNING) {
+    r->event = NUDGE_EPISODE_T_EVENT_STOPPED;
+    snprintf(r->reason, sizeof(r->reason), "the robot stopped on a reflex: %s",
+             tasks_reflex_name(io->run.reflex, io->run.reflex_joint));
   } else if (s == ND_TASK_SUCCESS) {
     r->event = NUDGE_EPISODE_T_EVENT_SUCCESS;
     snprintf(r->reason, sizeof(r->reason), "task error %.3g < eps %.3g", r->task_error, eps);
@@ -149,6 +172,7 @@ int tasks_run(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, const nd_goal *g, in
     snprintf(r->reason, sizeof(r->reason), "task error %.3g >= eps %.3g after %.2f s%s",
              r->task_error, eps, tau, age > MOCAP_GAP_WARN ? " (MOCAP stale)" : "");
   }
+  io->run.id = -1;
   if (publish_episode(lcm, io, id, r->event, r->reason, r->time, r->task_error)) goto fail;
   return 0;
 fail:
@@ -162,12 +186,15 @@ void tasks_print(int i, int n, const nd_goal *g, const tasks_result *r) {
          g->yaw * 180.0 / ND_PI);
   if (r->event == NUDGE_EPISODE_T_EVENT_REJECTED) {
     printf("rejected: %s\n", r->reason);
+  } else if (r->event == NUDGE_EPISODE_T_EVENT_STOPPED) {
+    printf("stopped after %.2f s, pos err %.3f m: %s\n", r->time, r->pos_err, r->reason);
   } else {
     const char *what = r->interrupted ? "interrupted after"
                        : r->event == NUDGE_EPISODE_T_EVENT_SUCCESS ? "reached in"
                                                                    : "timed out after";
-    printf("%s %.2f s, pos err %.3f m, yaw err %.1f deg\n", what, r->time, r->pos_err,
-           r->yaw_err * 180.0 / ND_PI);
+    printf("%s %.2f s, pos err %.3f m, yaw err %.1f deg, %lld plans, object path %.3f m, "
+           "sphere path %.3f m\n", what, r->time, r->pos_err, r->yaw_err * 180.0 / ND_PI,
+           (long long)r->plans, r->obj_path, r->ee_path);
   }
   fflush(stdout);
 }

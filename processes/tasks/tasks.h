@@ -65,6 +65,19 @@ typedef struct {
   const char *path;      /* the buffer, also while it cannot be opened */
 } tasks_buffer;
 
+#define MAX_PLAN_AGES 100000 /* plan ages kept for the percentiles: hours of plans */
+
+/* What happened during the running task, as the handlers see it. */
+typedef struct {
+  int64_t id;         /* the task; -1 between tasks */
+  int64_t plans;      /* PLANs for it */
+  double obj_path, ee_path;  /* m travelled by object and sphere (MOCAP) */
+  double last_obj[2], last_ee[2];
+  int have_last;
+  int stopped;        /* a reflex stopped the robot */
+  int reflex, reflex_joint;  /* robot_state_t.REFLEX_*, joint 1..7 or 0 */
+} tasks_running;
+
 /* What the LCM handlers update. */
 typedef struct {
   nudge_mocap_t last; /* newest valid frame */
@@ -74,6 +87,9 @@ typedef struct {
   ndp_status st;
   ndp_ratelog refused;
   tasks_buffer *buf;  /* NULL without --record */
+  tasks_running run;
+  double *ages;       /* MAX_PLAN_AGES: publication minus state time of each plan, ms */
+  int nages;
 } tasks_io;
 
 /* How one task ended. */
@@ -84,6 +100,8 @@ typedef struct {
   double task_error;
   double pos_err;    /* m */
   double yaw_err;    /* rad, modulo the cuboid's half-turn, in [0, pi/2] */
+  int64_t plans;     /* PLANs received for the task */
+  double obj_path, ee_path;  /* m */
   char reason[200];
 } tasks_result;
 
@@ -107,6 +125,8 @@ int tasks_wait_mocap(lcm_t *lcm, tasks_io *io, double wait, char *err, int errle
 int tasks_run(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, const nd_goal *g, int64_t id,
               tasks_result *r, char *err, int errlen);
 void tasks_print(int i, int n, const nd_goal *g, const tasks_result *r);
+/* What a ROBOT_STATE reflex code names: "joint 4 velocity", "Cartesian jerk". */
+const char *tasks_reflex_name(int reflex, int joint);
 int tasks_pause(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, int rejected, char *err,
                 int errlen);
 
