@@ -24,9 +24,35 @@ static void fail(nds_rollout_out *out) {
   out->diverged = 1;
 }
 
+/* Free flight's reach: the sphere is far when its centre is beyond the object's corner
+ * circle (the half diagonal), its radius, this margin and twice its step's travel; the
+ * object is at rest when no velocity component exceeds the thresholds (the rest jitter of
+ * a box on MuJoCo's soft contacts is ~1e-5). */
+#define FF_MARGIN 0.005
+#define FF_REST_V 1e-3  /* m/s */
+#define FF_REST_W 1e-2  /* rad/s */
+
+/* 1 if the step from d may skip MuJoCo: the sphere at pos, moving at vel, is out of reach
+ * of an object at rest. */
+static int free_to_fly(const nds_model *nm, const mjData *d, const double pos[2],
+                       const double vel[2], double reach, double dt) {
+  const double *ov = d->qvel + nm->obj_dof;
+  for (int k = 0; k < 3; k++)
+    if (fabs(ov[k]) > FF_REST_V || fabs(ov[3 + k]) > FF_REST_W) return 0;
+  const double *op = d->qpos + nm->obj_qpos;
+  const double dist = hypot(pos[0] - op[0], pos[1] - op[1]);
+  return dist > reach + 2.0 * dt * hypot(vel[0], vel[1]);
+}
+
 void nds_rollout(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
                  const nds_state *s0, const double sp0[2][4], const double *keys, int M,
                  double T, nds_rollout_out *out) {
+  nds_rollout_ff(nm, d, ctrl, s0, sp0, keys, M, T, 0, out);
+}
+
+void nds_rollout_ff(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
+                    const nds_state *s0, const double sp0[2][4], const double *keys, int M,
+                    double T, int free_flight, nds_rollout_out *out) {
   const mjModel *m = nm->m;
   char err[64];
   memset(out, 0, sizeof(*out)); /* padding too, so results compare bytewise */
@@ -58,6 +84,14 @@ void nds_rollout(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
   for (int k = 0; k < 2; k++)
     off[k] = m->body_pos[3 * nm->ee_body + k] - m->qpos0[nm->ee_qpos[k]];
 
+  /* The sphere's two slide dofs move its mass alone (nds_model checks: a leaf body, no
+   * armature); without damping MuJoCo's Euler step for them is v += dt f / m. */
+  const double *half = nm->cfg.obj_half;
+  const double reach = nm->cfg.ee_radius + hypot(half[0], half[1]) + FF_MARGIN;
+  const double inv_m = 1.0 / m->body_mass[nm->ee_body];
+  const int ff = free_flight && m->dof_damping[nm->ee_dof[0]] == 0 &&
+                 m->dof_damping[nm->ee_dof[1]] == 0;
+  long skipped = 0;
   int diverged = 0;
   for (long n = 0; n < nsteps && !diverged; n++) {
     /* Zero-order hold: the setpoint at the step's start drives the whole step, as the
@@ -79,6 +113,15 @@ void nds_rollout(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
       vel[k] = d->qvel[nm->ee_dof[k]];
     }
     nds_ctrl_pid(ctrl, &c, (const double(*)[4])s, pos, vel, dt, f);
+    if (ff && free_to_fly(nm, d, pos, vel, reach, dt)) {
+      for (int k = 0; k < 2; k++) {
+        d->qvel[nm->ee_dof[k]] += dt * f[k] * inv_m;
+        d->qpos[nm->ee_qpos[k]] += dt * d->qvel[nm->ee_dof[k]];
+      }
+      d->time += dt;
+      skipped++;
+      continue;
+    }
     d->qfrc_applied[nm->ee_dof[0]] = f[0];
     d->qfrc_applied[nm->ee_dof[1]] = f[1];
     mj_step(m, d);
@@ -104,6 +147,8 @@ void nds_rollout(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
   out->v_peak = sqrt(v2_peak);
   out->a_peak = sqrt(a2_peak);
   out->diverged = 0;
+  out->steps = (int)nsteps;
+  out->skipped = (int)skipped;
 }
 
 /* ---- batches on the pool ---- */
@@ -121,6 +166,7 @@ struct nds_batch {
   int M;
   double T;
   nds_rollout_out *out;
+  int free_flight;
 };
 
 nds_batch *nds_batch_create(const nds_model *proto, nd_pool *pool, char *err, int errlen) {
@@ -169,10 +215,12 @@ int nds_batch_set_theta(nds_batch *b, const double theta[ND_NTHETA], char *err, 
   return 0;
 }
 
+void nds_batch_set_free_flight(nds_batch *b, int on) { b->free_flight = on; }
+
 static void batch_task(void *ctx, int task, int worker) {
   nds_batch *b = ctx;
-  nds_rollout(&b->models[worker], b->data[worker], b->ctrl, b->s0, b->sp0,
-              b->keys + (size_t)task * 4 * b->M, b->M, b->T, &b->out[task]);
+  nds_rollout_ff(&b->models[worker], b->data[worker], b->ctrl, b->s0, b->sp0,
+                 b->keys + (size_t)task * 4 * b->M, b->M, b->T, b->free_flight, &b->out[task]);
 }
 
 void nds_batch_rollouts(nds_batch *b, const nds_ctrl_cfg *ctrl, const nds_state *s0,

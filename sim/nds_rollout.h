@@ -20,6 +20,7 @@ typedef struct {
   double v_peak;        /* peak setpoint speed over the rollout, m/s */
   double a_peak;        /* peak setpoint acceleration magnitude, m/s^2 */
   int diverged;         /* non-finite state or a MuJoCo instability warning */
+  int steps, skipped;   /* steps, and of those skipped in free flight (nds_rollout_ff) */
 } nds_rollout_out;
 
 /* Run one rollout on d (any prior content; the result depends only on the arguments).
@@ -30,6 +31,16 @@ typedef struct {
 void nds_rollout(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
                  const nds_state *s0, const double sp0[2][4], const double *keys, int M,
                  double T, nds_rollout_out *out);
+
+/* nds_rollout with free flight (free_flight 1): while the sphere is far from an object at
+ * rest, the steps skip MuJoCo and integrate the sphere alone as MuJoCo's Euler step would
+ * (v += dt f / m, x += dt v), the object held still: nothing can touch it then, and the
+ * contact solver is most of a step's cost. Results agree with free_flight 0 to the rest
+ * jitter of a box MuJoCo would have integrated (nudge-bench prints the figures). out->
+ * skipped counts the steps that skipped. */
+void nds_rollout_ff(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
+                    const nds_state *s0, const double sp0[2][4], const double *keys, int M,
+                    double T, int free_flight, nds_rollout_out *out);
 
 /* Per-worker MuJoCo copies for parallel rollouts: each worker owns an nds_model copy
  * (so theta can differ per task) and one mjData, allocated once. */
@@ -45,6 +56,9 @@ mjData *nds_batch_data(nds_batch *b, int worker);
 
 /* Apply theta to every worker's model. Return 0, or -1 with a message (models unchanged). */
 int nds_batch_set_theta(nds_batch *b, const double theta[ND_NTHETA], char *err, int errlen);
+
+/* Rollouts of b in free flight (nds_rollout_ff) from now on: 1 on, 0 off (the default). */
+void nds_batch_set_free_flight(nds_batch *b, int on);
 
 /* Run n rollouts (keys: n * M * 4) from one state in parallel; out has n entries. */
 void nds_batch_rollouts(nds_batch *b, const nds_ctrl_cfg *ctrl, const nds_state *s0,
