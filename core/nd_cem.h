@@ -35,11 +35,11 @@ typedef struct {
   double step_std;    /* >= 0: a std is at least step_std times its mean's step in the
                          update, so (for step_std >= 1) it grows while the elites lie on
                          one side (a slope) and shrinks once they straddle the optimum;
-                         0: plain CEM */
+                         0: plain CEM (doc/decisions.md#step-std) */
   double step_gate;   /* >= 0: the step_std rule applies only to a step of at least step_gate
                          sampling stds (on a slope the elite mean moves ~1.4 std; a shorter
                          step means the elites found the optimum inside the samples); 0: any
-                         step */
+                         step (doc/decisions.md#step-gate) */
   const double *lower; /* per-dim bounds (dim values) or NULL for none (each side on its
                           own); samples, mean and shifted elites are clipped */
   const double *upper;

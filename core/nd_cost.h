@@ -1,4 +1,5 @@
-/* nd_cost: the plan cost terms and the task's terminal condition (DESIGN.md sec. 4). */
+/* nd_cost: the plan cost terms and the task's terminal condition (doc/design.md#plan-cost,
+ * doc/design.md#terminal). */
 #ifndef ND_COST_H
 #define ND_COST_H
 
@@ -10,7 +11,7 @@ typedef struct {
   double w_rot, w_prox, w_acc;
 } nd_cost_weights;
 
-/* The project's default weights (see nd_cost.c for why they differ from the paper). */
+/* The project's default weights (nd_cost.c says why; the paper's l2, l3 are illegible). */
 nd_cost_weights nd_cost_weights_default(void);
 
 /* L_pos = |obj - goal|^2 over (x, y). */

@@ -31,7 +31,7 @@
  * and a plan whose segment or brake leaves the box plus margin is refused like one that
  * breaks the limits: the committed trajectory goes on, and stale inputs bring it to rest
  * within the margin. The 1 kHz step pays nothing for it, except on going stale, when the
- * few brake candidates each get the same range check. */
+ * few brake candidates each get the same range check (doc/decisions.md#workspace). */
 #include "nd_exec.h"
 
 #include <math.h>

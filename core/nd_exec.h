@@ -47,7 +47,8 @@ typedef struct {
 } nd_exec_cfg;
 
 /* The default workspace, also the planner's default keypoint box (nds_planner_cfg), and
- * the room its trajectories need beyond it (nd_exec.c says how much that is). */
+ * the room its trajectories need beyond it: a segment's overshoot and a brake's travel
+ * (nd_exec.c; doc/decisions.md#workspace). */
 #define ND_EXEC_WS_LO (-0.5)
 #define ND_EXEC_WS_HI 0.5
 #define ND_EXEC_WS_MARGIN 0.04
@@ -109,7 +110,10 @@ int nd_exec_keys_check(const nd_exec_cfg *cfg, const double (*keys)[4], int n, c
 
 /* A keypoint within this (m, m/s, per component) of the one the running segment is
  * heading for is that keypoint re-sent: the planner found nothing better and published its
- * previous best again, bit for bit. Anything its search changes moves by centimetres. */
+ * previous best again, bit for bit. Anything its search changes moves by centimetres.
+ * Such a plan renews the segment instead of restarting it: restarting postpones the
+ * keypoint each time, and a segment from rest restarted every plan never gets going
+ * (doc/decisions.md#exec-keep-segment). */
 #define ND_EXEC_SAME_KEY 1e-6
 
 /* 1 if ex is on a tracking segment that has not ended at now and that ends at key =

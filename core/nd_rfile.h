@@ -53,7 +53,7 @@
 #define ND_RFILE_VERSION 1
 #define ND_RFILE_HEADER 40
 #define ND_RFILE_FRAME 12                     /* record header bytes */
-#define ND_RFILE_MAX_PAYLOAD (64u << 20)      /* 64 MiB; a 600k-step rollout is 33.6 MB */
+#define ND_RFILE_MAX_PAYLOAD (64u << 20)      /* 64 MiB; the longest rollout is 65.3 MB */
 #define ND_RFILE_KIND_MAX 0xFFFFu
 #define ND_RFILE_PATH_MAX 1024
 

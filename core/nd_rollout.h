@@ -6,16 +6,15 @@
  * step, and what was observed after each step. Plain arrays, owned by the struct
  * (nd_rollout_alloc / nd_rollout_free).
  *
- * The setpoints are kept because replaying forces open-loop lets the sphere run away as
- * soon as a candidate theta makes contact differ from the recording, which makes the
- * replay loss rough in theta; replaying the setpoints through the robot's tracking
- * controller keeps the sphere on its path and the loss smooth (sim/nds_replay.h).
+ * The refit replays the recorded force, re-anchored on the observations
+ * (doc/design.md#refit); the setpoints are kept so a rollout can also be replayed through
+ * the robot's tracking controller (SETPOINT replay, sim/nds_replay.h), an option.
  *
  * The object is observed as motion capture sees it: its full pose, position and
- * orientation. The loss compares only x, y and yaw (DESIGN.md sec. 4), but the replay puts
- * the whole observed pose back into the model at every re-anchoring: a sliding box hops on
- * MuJoCo's soft contact, and a replay that kept its own height and tilt would start each
- * window from a different hop than the recording did (sim/nds_replay.h).
+ * orientation. The loss compares only x, y and yaw, but the replay puts the whole observed
+ * pose back into the model at every re-anchoring: a sliding box hops on MuJoCo's soft
+ * contact, and a replay that kept its own height and tilt would start each window from a
+ * different hop than the recording did (sim/nds_replay.h).
  *
  * Encoding (the payload of a replay-buffer record, see nd_rfile.h), version 3, every
  * field little-endian, doubles as IEEE-754 binary64 bit patterns (bitwise round trip):
@@ -46,10 +45,8 @@
  * every quaternion (obj_quat, obj[i][3..6]) has a norm within ND_ROLLOUT_QUAT_TOL of 1.
  * Encoding refuses an invalid rollout, so nothing a decoder would reject is ever written.
  * Version 2 (obj[n][3]: x, y, yaw) is refused by name: its records lack the height and
- * tilt the replay needs, and cannot be re-derived.
- *
- * Changes from the first draft of this header (h9): the encode/decode/check functions
- * and the size constants were added; alloc/free spell out their ownership rules. */
+ * tilt the replay needs, and cannot be re-derived (doc/decisions.md#rollout-encoding;
+ * the format: doc/file-format.md). */
 #ifndef ND_ROLLOUT_H
 #define ND_ROLLOUT_H
 
@@ -62,11 +59,16 @@ enum { ND_CTRL_FORCE = 0, ND_CTRL_VELOCITY = 1 };
 /* How the task ended (as nd_task_status, plus aborted). */
 enum { ND_OUTCOME_SUCCESS = 1, ND_OUTCOME_TIMEOUT = 2, ND_OUTCOME_ABORTED = 3 };
 
-#define ND_ROLLOUT_MAX_STEPS 600000   /* 10 min at 1 kHz: a sanity bound for decoding */
+/* 8 min at 1 kHz: the longest rollout whose encoding (65.3 MB) fits one record of the
+ * replay buffer (ND_RFILE_MAX_PAYLOAD, 64 MiB), so every valid rollout can be appended. */
+#define ND_ROLLOUT_MAX_STEPS 480000
 
 #define ND_ROLLOUT_ENC_VERSION 3
 #define ND_ROLLOUT_ENC_FIXED 232      /* bytes before the step arrays */
 #define ND_ROLLOUT_ENC_STEP 136       /* bytes per step */
+_Static_assert(ND_ROLLOUT_ENC_FIXED + (unsigned long long)ND_ROLLOUT_ENC_STEP *
+                                            ND_ROLLOUT_MAX_STEPS <= 64ull << 20,
+               "the longest rollout must fit one replay-buffer record");
 #define ND_ROLLOUT_OBJ 7              /* obj columns: x, y, z, qw, qx, qy, qz */
 #define ND_ROLLOUT_QUAT_TOL 1e-2      /* |norm - 1| a stored quaternion may have (MOCAP's) */
 

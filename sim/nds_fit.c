@@ -1,4 +1,5 @@
-/* nds_fit: CEM over theta, scoring candidates by replaying the buffer on the pool.
+/* nds_fit: CEM over theta, scoring candidates by replaying the buffer on the pool
+ * (doc/design.md#refit).
  *
  * The optimiser works on theta / sigma0 per fitted parameter. Plain CEM is indifferent to
  * a per-coordinate scale, but the parameters span four decades (sliding ~1, rolling
@@ -14,125 +15,28 @@
 
 #include "nd_cem.h"
 
-/* The weights of L (the paper does not give them legibly).
- * k1 = 1: the sphere's path is as much an observation as the object's, and in force mode
- * it is what the sphere mass and the contact forces show in first.
- * k2 = 1e-3 m^2/rad: L_rot,o is a mean absolute angle (linear in the error), the position
- * terms mean squares. A yaw error phi moves the box's corners by r phi (r = 5.8 cm, the
- * half diagonal), i.e. r^2 phi^2 = 3.4e-3 phi^2 m^2; k2 phi equals that at phi = 0.3 rad
- * and stays below it for larger errors, so yaw counts about as much as the corner error it
- * causes for the errors a poor torsional friction gives (0.1-0.3 rad), while near the fit
- * its linear slope keeps rotation informative where the squared terms flatten out. One
- * radian then weighs as (3.2 cm)^2 of position error. */
+/* The weights of L (the paper's are not legible). k1 = 1: the sphere's path is as much an
+ * observation as the object's. k2 = 1e-3 m^2/rad: L_rot,o is a mean absolute angle, so a
+ * yaw error counts about as much as the corner displacement it causes for the errors a
+ * poor torsional friction gives (0.1-0.3 rad), and its linear slope keeps yaw informative
+ * near the fit, where the squared terms flatten (doc/decisions.md#fit-weights). */
 #define NDS_FIT_K1 1.0
 #define NDS_FIT_K2 1e-3
 
-/* Replay window: FORCE re-anchored on the full observed pose every 5 ms. Once the records
- * held the box's whole pose (nd_rollout.h) and re-anchoring put its height and tilt back
- * too, L became a bowl around the truth (test_replay_bowl: monotone from 0.5 % to 50 %
- * in each friction), and the shorter the window the better the fit, as nothing chaotic
- * is left to average out and a short window keeps each error local. Runs within 5 % after
- * episode 2 at D = 1 (nudge-experiment --quick --runs 10 --episodes 2 --d 1 --eval-tasks
- * 1, seeds 1-4, 40 runs; ranked by L), with the mean torsional error at episodes 0 -> 2:
- *   window 0.1 s   37/40   48.0 -> 47.3 %      window 0.01 s   37/40   48.0 -> 36.9 %
- *   window 0.02 s  32/40   48.0 -> 39.9 %      window 0.005 s  39/40   48.0 -> 34.1 %
- *   window 0.002 s 39/40   48.0 -> 32.0 %
- * 0.005 s keeps a few model steps per window at a 2 ms model too (the adapter uses
- * NDS_FIT_WINDOW_MOCAP for its interpolated motion-capture records, nds_fit.h). The
- * validation loss fell in all 160 of those runs' windows below 0.1 s (one rise at 0.1 s).
- * Plain CEM (step_std 0) at 0.01 s: 4/10 on seed 1, so the step rules below still matter.
- * The robust score, built for the rough loss, is not needed: at 0.01 s, 26/29 (the 29 runs
- * an A/B stopped early had finished; its scale 1e-9 m^2 was set for the old loss's level).
- *
- * Everything below up to the robust score was measured with the earlier replay, which
- * re-anchored only what a planar observation held (x, y, yaw), on a loss that was white
- * noise within ~2 % of the truth. The rules it chose stay; their figures are of that
- * loss.
- *
- * How the fit deviates from the paper's plain CEM on a one-shot replay, and why. The
- * decisive measurements, nudge-experiment --quick --eval-tasks 1 (same priors and seeds):
- * runs whose sliding friction is within 5% after episode 2, D = 1, first 6 runs:
- *   one-shot SETPOINT replay, std floor 0.5 (the previous default)        2/6
- *   SETPOINT, 0.1 s windows, floor 0.5                                     3/6
- *   SETPOINT, 0.1 s windows, step_std 1, floor 0.25                        4/6
- *   FORCE, 0.2 s windows, step_std 1, floor 0.25                           5/6
- *   FORCE, 0.1 s windows, step_std 1, floor 0.25                           6/6
- * and on 10 runs (two priors 93% and 97% off): step_std 1 8/10, step_std 2 10/10 (worst
- * 4.3%). At D = 0.2 (6 runs, 3 episodes) rel_floor 0.05 matters: without it three runs
- * froze at 12-19% error (the std at its floor of 0.6% of theta samples only the loss's
- * roughness, below), with it the worst is 3.4% (step_std 2).
- * Re-checked after the executor's fix shortened the training pushes (nudge-experiment
- * --quick --runs 10 --episodes 2 --d 1, seeds 1 and 2, runs within 5%): these defaults
- * 8 + 8; --step-std 3 9 + 6; --rel-floor 0.1 10 + 7; --window 0.15 8 + 8, 0.2 6 + 9.
- * Within the seeds' spread, so the defaults stay: the loss has no trend within ~5% of
- * the truth there (nudge-experiment --landscape).
- *
- * Step size. Plain CEM with C = 2 and rho = 0.2 shrinks the std to ~0.47 of itself per
- * iteration while the optimum lies outside the samples, so from the paper's prior
- * (sigma0 = 2 D theta / 16) the mean travels at most ~2.6 sigma0 in all (0.33 for sliding
- * friction at D = 1, whose prior error reaches 1.0) and then freezes. With step_std 2 the
- * std is at least twice the mean's last step: along a slope it grows ~2.8x per iteration
- * (the elite mean moves ~1.4 std), once the elites straddle the optimum it collapses to
- * their spread. The floors keep a warm-started fit able to move when a new rollout shifts
- * the optimum: std_floor in units of sigma0, rel_floor relative to the mean at the start
- * of each run, which keeps the samples wider than the loss's roughness.
- *
- * Step gate. A long step is not always a slope: a wide std (after a far travel) samples
- * the optimum, the elites land on it, and step_std alone kept the std at twice that step,
- * so the next iteration drew as widely again and its elite mean carried the loss's
- * asymmetry (flatter above the truth: a box that barely slides errs less than one that
- * slides too far), e.g. 0.666 (std 0.88) -> 1.150. At D = 1, within 5% after episode 2
- * happened in 24 of 25 runs entering episode 2 with std <= 0.4 against 44 of 56 above
- * (80 runs, robust score). step_gate 0.75 applies step_std only to steps of at least 0.75
- * sampling stds (a slope moves the elite mean ~1.4 std; noise shortens it). Same A/B, 80
- * runs (--quick --runs 10 --episodes 2 --d 1 --eval-tasks 1, seeds 1-8):
- *   score    gate 0   gate 0.5   gate 0.75   gate 1
- *   L        63       69         68          67
- *   robust   67       71         74          74
- * gate 1 cut the growth on noisy slopes (per seed 6-10 against 8-10 at 0.75). Checked on
- * seeds 9-16, which did not choose it (robust): gate 0 67/80, gate 0.75 69/80. Two other
- * rules, measured with scratch code that is not kept (seeds 1-8 / 9-16): growing only
- * while at most half an elite count of worse samples lie beyond the elite mean, 74/71;
- * either that or the gate, 74/70. No better, so the simpler rule stays. The gate's cost:
- * a noisy slope's short step shrinks the std (0.252 -> 0.367 -> 0.435; ungated 0.961).
- *
- * Replay: FORCE (the paper's simulation replay), re-anchored (nds_replay.h). The figures
- * below scanned L along sliding friction on one buffer (run 3 of the D = 1 A/B above, two
- * planned tasks) with the planar re-anchoring; `nudge-experiment --landscape --window W`
- * writes the same curves over ten planned tasks with the present one.
- * - FORCE sees sliding friction where SETPOINT hides it: the tracking controller holds the
- *   sphere on its path and the box follows it whatever the table's friction, so the loss
- *   over sliding friction is shallow (L at 20% error 4x its level at 2%, against 7x for
- *   FORCE) and a wrong torsional friction moves its minimum to 0.88 (FORCE: ~1.0).
- * - One shot, FORCE's open-loop forces push the sphere off the box as soon as contact
- *   differs, so its L is a cliff on long pushes (a 1e-4 relative change of sliding
- *   friction: L 0.54 on a straight push). Re-anchoring bounds every error to its window.
- * - The recorded pushes are hypersensitive: a 0.1% change of sliding friction already
- *   gives the full ~1e-6 level of L within 0.05 s windows. Longer windows raise the trend
- *   over that level (0.2 s: L at 20% error ~12x that at 2%) but let errors compound; 0.1 s
- *   measured best.
- * - Why hypersensitive: MuJoCo's soft contact lifts a box that slides. Pushed, it hops on
- *   fewer than 3 of its 4 table contacts in most steps (`nudge-experiment --landscape`,
- *   `lift` lines: 85% of the steps the sphere touches it on the planned tasks, up to
- *   0.44 mm above rest; a bare 8 N push at its centre, no sphere: 89%, 1.1 mm), and when
- *   each landing happens moves with theta. Scratch code, not kept, traced one window of a
- *   planned push: theta 1.020 against 1.021 start 1e-8 m apart and are 5.8e-5 m and
- *   3.5e-4 rad apart 10 ms later, 2.4 mm and 0.038 rad at the window's end, while the box
- *   touched the table in 0-3 corners a step. The score is then white noise in theta down
- *   to 0.1% steps (robust score sd 0.38 over 1.020..1.040 on two rollouts, against a rise
- *   of 1-2 from the truth's neighbourhood to +-15%). The same scratch code tried to keep the
- *   box down under the bare push; none did (share of steps on < 3 table contacts, 89%
- *   as built): impratio 0.1, 0.3, 10 (92, 89, 91%), the pyramidal cone (91%), 10 noslip
- *   iterations and a 1e-13 tolerance with 100 iterations (both unchanged), condim 3 (89%),
- *   solref 0.005 and 0.002 (98%: a stiffer contact throws it higher), a 3 cm tall box
- *   (90%), damping on its height, 5-100 N s/m (91-92%), friction 0.5 and 0.3 (90, 88%); a
- *   0.2 ms step cut the rise from 1.1 mm to 0.19 mm, not the lost contacts (92%).
- *   Re-anchoring the box's height and tilt to rest at every window made the score a smooth
- *   bowl within +-0.5% of the truth but biased the fit, since the recorded box did hop:
- *   51/80 within 5% (robust score, the step-gate A/B's seeds 1-8, against 74/80), 2/40
- *   ranked by L (seeds 1-4). Re-anchoring them to the recorded hop (the full pose, which
- *   motion capture observes) removed the roughness without the bias: the window above.
- * - Under the recording theta the re-anchored replay is exact up to rounding (~1e-19). */
+/* Beyond the paper's plain CEM on a one-shot replay (doc/design.md#refit):
+ * - FORCE replay, re-anchored on the observed full pose every NDS_FIT_WINDOW: one-shot
+ *   force replay is a cliff once contact differs, setpoint replay hides sliding friction,
+ *   and with the full pose put back L is a bowl around the truth whose fit improves as the
+ *   window shortens; 5 ms keeps a few model steps per window at a 2 ms model too
+ *   (doc/decisions.md#replay-mode, #full-pose, #replay-window). Records interpolated from
+ *   MOCAP frames use NDS_FIT_WINDOW_MOCAP instead (nds_fit.h).
+ * - step_std: the std is at least twice the mean's last step, so the mean can travel the
+ *   whole prior; plain CEM freezes after ~2.6 sigma0 (doc/decisions.md#step-std).
+ * - step_gate: only steps of at least 0.75 sampling stds count, so a wide std that has
+ *   sampled the optimum does not draw as widely again (doc/decisions.md#step-gate).
+ * - std_floor (in units of sigma0) and rel_floor (of the mean, at the start of each refit)
+ *   keep a warm-started fit able to move when a new rollout shifts the optimum
+ *   (doc/decisions.md#step-std). */
 #define NDS_FIT_STD_FLOOR 0.25
 #define NDS_FIT_MODE_DEFAULT NDS_REPLAY_FORCE
 #define NDS_FIT_WINDOW 0.005
@@ -140,24 +44,10 @@
 #define NDS_FIT_STEP_GATE 0.75
 #define NDS_FIT_REL_FLOOR 0.05
 
-/* Ranking by the robust score (nds_replay_bounded; scale NDS_FIT_ROBUST_SCALE: a window's L
- * below 1e-9 m^2, an RMS error of 0.03 mm, counts about linearly, above it
- * logarithmically). Why not L: the pushes are hypersensitive (above), and L, a sum of
- * squares, is mostly the few windows where a contact switched; along sliding friction on
- * the ten planned training tasks it is flat within +-7.5% (nudge-experiment --landscape,
- * its robust-vs-L lines set both curves side by side). A/B, runs within 5% after episode
- * 2 at D = 1 (nudge-experiment --quick --runs 10 --episodes 2 --d 1 --eval-tasks 1, seeds
- * 1-8, 80 runs each), before the step gate (--step-gate 0):
- *   ranked by L (--robust 0)                    63/80, per-seed medians 0.9-5.2% (mean 2.6%)
- *   by L without yaw (--robust 0 --rot-weight 0) 66/80, medians 1.7-3.1% (mean 2.3%)
- *   robust score (--robust 1e-9)                67/80, medians 0.9-2.2% (mean 1.5%)
- * (--rot-weight 1e-4: 14/20 on seeds 1-2, against 16/20 for L.) The robust score halves
- * the typical error; the runs it still missed started far (D = 1 draws up to 97% off) and
- * overshot in their fourth CEM iteration (0.31 -> 0.75 -> 1.086, 1.94 -> 1.21 -> 0.90),
- * which the step gate mends (74/80 with it; L 68/80).
- * It is not the default because it costs refit time: its log keeps poor candidates'
- * partial scores under the pruning bound longer, and nudge-bench's 10 x 5 s refit
- * (refit_s_10x5s_robust) goes past the adapter's 10 s budget. */
+/* Candidates are ranked by L, the paper's score. The robust score (nds_replay_bounded,
+ * NDS_FIT_ROBUST_SCALE) ranked better on the earlier, rough loss, but its log keeps poor
+ * candidates under the pruning bound longer and the adapter's refit then overran its 10 s
+ * budget; it stays an option (doc/decisions.md#robust-score). */
 #define NDS_FIT_ROBUST 0.0
 
 /* Default prior width: the paper's smaller uncertainty, D = 0.2. */
@@ -209,9 +99,8 @@ struct nds_fit {
 
 /* Candidate costs that differ by no more than this (m^2) are the same: a buffer that gives
  * every candidate the same L says nothing about the fitted parameters. Rollouts in which
- * the sphere never touched the box replay to identical L for any friction (seen: 2.6e-30
- * and 6.3e-30 over a whole CEM run), while a single contact makes candidates differ by
- * > 1e-10. */
+ * the sphere never touched the box replay to an L of ~1e-30 for any friction, while a
+ * single contact makes candidates differ by > 1e-10 (doc/decisions.md#flat-loss). */
 #define FLAT_COST 1e-15
 
 void nds_fit_cfg_default(nds_fit_cfg *cfg) {
@@ -584,8 +473,7 @@ static void eval_batch(nds_fit *f, int ncand, int prune, double robust, double *
     /* Two passes: every candidate's first rollout, then the rest in the order of that
      * first score. The candidates likely to be elites then complete first, and the bound
      * is tight while most of the others still have rollouts to go (a smooth L ranks on
-     * one rollout nearly as on all). nudge-bench's 10 x 5 s refit: 572 replays started in
-     * one pass (11.20 s), 532 in two (9.71 s). */
+     * one rollout nearly as on all; doc/decisions.md#prune). */
     f->r0 = 0, f->nrp = 1;
     nd_pool_run(f->pool, ncand, replay_task, f);
     order_by_done(f, ncand);

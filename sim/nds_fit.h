@@ -1,12 +1,13 @@
-/* nds_fit: fitting theta to recorded rollouts with CEM (paper sec. III-C, DESIGN.md sec. 4).
+/* nds_fit: fitting theta to recorded rollouts with CEM (paper sec. III-C;
+ * doc/design.md#refit).
  *
  * Each candidate theta is scored by replaying every rollout of the buffer (nds_replay)
  * and summing the rollouts' L = L_pos,o + k1 L_pos,ee + k2 L_rot,o. The optimiser is the
  * project's nd_cem in its plain configuration: white Gaussian noise per parameter, no
  * elites kept, no population decay, no momentum, no injected mean; only a floor on the std
  * (std_floor, rel_floor) and a std that follows the mean's long steps (step_std,
- * step_gate; nds_fit.c). Kept elites would carry costs measured on an older buffer into
- * the next refit, and with C = 2 the extra evaluations buy little.
+ * step_gate; nds_fit.c says why). Kept elites would carry costs measured on an older
+ * buffer into the next refit, and with C = 2 the extra evaluations buy little.
  *
  * The distribution persists between runs: create sets it to the prior (mu0, sigma0),
  * each nds_fit_run goes on from where the last ended (the incremental loop's warm start
@@ -24,18 +25,16 @@
 
 #define NDS_FIT_MAX_ITERS 16
 
-/* Re-anchoring window for records whose object pose was interpolated between motion-capture
- * frames (nudge-tasks: MOCAP at 240 Hz, steps at 1 kHz) rather than observed at every step,
- * s. A window of a frame or two re-anchors on the interpolation's artefacts (its rates are
- * a frame's mean), which bias the fit. Live incremental loop from sliding friction 0.3
- * (nudge-up demo --theta 0.3,... -- --await-fit 60), sliding friction after 4 tasks, three
- * runs each: 0.83, 0.70, 0.95 at the fit's 5 ms; 0.94, 0.93, 0.94 at 0.1 s. The
- * adapter's default (its records come from nudge-tasks); nds_fit_cfg_default keeps 5 ms,
- * for records observed at every step (nds_record, the study). */
+/* Re-anchoring window, s, for records whose object pose was interpolated between
+ * motion-capture frames (nudge-tasks: MOCAP at 240 Hz, steps at 1 kHz) rather than
+ * observed at every step: a window of a frame or two re-anchors on the interpolation,
+ * whose rates are a frame's mean, and biases the fit. The adapter's default (its records
+ * come from nudge-tasks); nds_fit_cfg_default keeps 5 ms for records observed at every
+ * step (nds_record, the study). doc/decisions.md#mocap-window */
 #define NDS_FIT_WINDOW_MOCAP 0.1
 
-/* The robust score's scale that the study measured best (nds_fit.c), m^2; not the
- * default (nds_fit_cfg.robust). */
+/* The robust score's scale that ranked best when it was measured, m^2; the default ranks
+ * by L instead (nds_fit_cfg.robust; doc/decisions.md#robust-score). */
 #define NDS_FIT_ROBUST_SCALE 1e-9
 
 typedef struct {
@@ -63,10 +62,10 @@ typedef struct {
 
 /* Paper settings: Q 32, C 2, rho 0.2, fitting the three frictions with the mass held;
  * prior at nd_theta_true with the paper's D = 0.2 std; lower 1e-7; k1 = 1,
- * k2 = 1e-3 m^2/rad; prune; seed 1. Beyond the paper (measured in nds_fit.c): step_std 2
- * gated at 0.75 std, std_floor 0.25, rel_floor 0.05, FORCE replay re-anchored every 5 ms
- * with the default controller, candidates ranked by L (robust 0; 1e-9 m^2 ranks better
- * but replays more, nds_fit.c). */
+ * k2 = 1e-3 m^2/rad; prune; seed 1. Beyond the paper (nds_fit.c; doc/decisions.md):
+ * step_std 2 gated at 0.75 std, std_floor 0.25, rel_floor 0.05, FORCE replay re-anchored
+ * on the observed full pose every 5 ms with the default controller, candidates ranked by
+ * L (robust 0). */
 void nds_fit_cfg_default(nds_fit_cfg *cfg);
 
 /* Check cfg. Return 0, or -1 naming the bad field. */

@@ -21,7 +21,8 @@
  * nothing a 20 Hz re-plan needs. The elliptic cone makes torsional and rolling friction
  * the physical cone of theta rather than its pyramid approximation: it costs ~40% more
  * per step than pyramidal, and the two disagree by ~1 cm / 0.1 rad on a 10 cm push.
- * No noslip: it would add a second solver pass for a drift the soft contacts tolerate. */
+ * No noslip: it would add a second solver pass for a drift the soft contacts tolerate.
+ * (doc/decisions.md#scene-solver) */
 #define NDS_ITERATIONS 20
 #define NDS_TOLERANCE 1e-8
 

@@ -24,8 +24,9 @@ typedef struct {
 
 /* Defaults: 10 x 6 x 5 cm, 0.5 kg box; 2.5 cm sphere; 1 ms; condim 6; tilt damping 0.1;
  * nd_theta_true. The tilt damping keeps a sliding box from rocking on its soft corner
- * contacts at coarse timesteps (MuJoCo's Euler integrates it implicitly); it leaves yaw
- * and translation free, and a box that stays flat, as a pushed box does, never feels it. */
+ * contacts at coarse timesteps (MuJoCo's Euler integrates it implicitly), which worsened
+ * the planning model's prediction; it leaves yaw and translation free, and a box that
+ * stays flat, as a pushed box does, never feels it (doc/decisions.md#tilt-damping). */
 void nds_scene_cfg_default(nds_scene_cfg *cfg);
 
 typedef struct {

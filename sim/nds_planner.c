@@ -44,7 +44,8 @@ void nds_planner_cfg_default(nds_planner_cfg *cfg) {
   cfg->ws_lo[0] = cfg->ws_lo[1] = ND_EXEC_WS_LO;  /* the executor's box: one default */
   cfg->ws_hi[0] = cfg->ws_hi[1] = ND_EXEC_WS_HI;
   cfg->key_v_max = 1.0;
-  /* Panda Cartesian limits (NOTES.md) with margin, so the executor never has to clip. */
+  /* The Panda's Cartesian limits (1.7 m/s, 13 m/s^2: nd_exec_cfg_default) with margin, so
+   * the executor never has to stretch what was planned (doc/decisions.md#planner-limits). */
   cfg->v_max = 1.5;
   cfg->a_max = 10.0;
   cfg->limit_penalty = 10.0;
@@ -66,7 +67,8 @@ static int plan_cost(void *ctx, const double *x, int n, double *cost) {
     }
     double e = nd_cost_plan(&c->w, p->goal, o->obj_xy, o->obj_yaw, o->ee_xy, o->acc_sq_mean);
     /* A step penalty plus the relative excess ranks every candidate the robot could not
-     * execute behind every one it could (task costs are far below limit_penalty). */
+     * execute behind every one it could (task costs are far below limit_penalty;
+     * doc/decisions.md#planner-limits). */
     double ex = fmax(0.0, o->v_peak / c->v_max - 1.0) + fmax(0.0, o->a_peak / c->a_max - 1.0);
     if (ex > 0.0) e += c->limit_penalty * (1.0 + ex);
     cost[i] = e;

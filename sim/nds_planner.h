@@ -27,7 +27,8 @@ typedef struct {
   uint64_t seed;
 } nds_planner_cfg;
 
-/* Paper's simulation settings (N 128, C 4, M 2, T 0.3 s) with the project's limits. */
+/* Paper's simulation settings (N 128, C 4, M 2, T 0.3 s) with the project's limits
+ * (doc/design.md#icem). */
 void nds_planner_cfg_default(nds_planner_cfg *cfg);
 
 typedef struct {

@@ -11,16 +11,17 @@
  *             ran. Any record (both kinds carry sp).
  * After each step the model's object (x, y, yaw of its pose) and sphere (x, y) are
  * compared with what was observed, giving one rollout's terms of the adaptation loss
- * (DESIGN.md sec. 4):
+ * (doc/design.md#refit):
  *
  *   L = L_pos,o + k1 L_pos,ee + k2 L_rot,o, each term 1/T sum over the T compared steps.
  *
- * Why SETPOINT. An open-loop force replay under a candidate theta lets the sphere drift
- * from the recorded path as soon as contact differs (a slipperier box resists less, the
- * same force throws the sphere further), so the loss mixes the parameter's effect with a
- * growing sphere error and is rough in theta. The PID keeps the sphere on the commanded
- * path, as the real controller did, and the loss sees the object's response. Under the
- * recording theta both are exact: the PID recomputes the recorded force bit for bit.
+ * The fit replays FORCE, re-anchored (below; nds_fit_cfg_default). Open loop, the sphere
+ * drifts from the recorded path as soon as contact differs under a candidate theta, which
+ * makes a one-shot force replay rough in theta; re-anchoring bounds that drift to a window.
+ * SETPOINT keeps the sphere on its path through the PID, as the real controller did, but
+ * thereby hides sliding friction: the box follows the sphere whatever the table's friction
+ * (doc/decisions.md#replay-mode). Under the recording theta FORCE and SETPOINT are exact:
+ * the PID recomputes the recorded force bit for bit.
  *
  * A model whose timestep is k times the record's (k a whole number) replays k recorded
  * steps per model step and compares every k-th observation: FORCE and VELOCITY with the
@@ -60,7 +61,8 @@ typedef struct {
  * contact lifts a sliding box by up to a millimetre, and when each corner lands again
  * depends chaotically on theta, so a replay that kept its own height and tilt started
  * each window from a different hop and its loss was white noise within ~2 % of the truth
- * (nds_fit.c). At the recording theta the replay stays exact up to rounding. */
+ * (doc/decisions.md#box-lift). At the recording theta the replay stays exact up to
+ * rounding. */
 
 /* mode with the default controller (nds_ctrl_cfg_default), no re-anchoring. */
 void nds_replay_cfg_default(nds_replay_cfg *cfg, int mode);
@@ -113,9 +115,10 @@ int nds_replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg, const 
  *   e_w = 1/|w| sum_{t in w} |y_o - y~_o|^2 + k1 |y_ee - y~_ee|^2 + k2 |phi - phi~|
  *
  * over the N re-anchoring windows w (the whole replay is one when cfg->window is 0): each
- * window's L, through the Cauchy loss of scale robust. Why: contacts make a few windows'
- * errors jump by orders of magnitude for a tiny change of theta (nds_fit.c), and L, a sum
- * of squares, is then mostly those few windows; the log lets every window count. */
+ * window's L, through the Cauchy loss of scale robust. Why: where contacts make a few
+ * windows' errors jump by orders of magnitude for a tiny change of theta, L, a sum of
+ * squares, is mostly those few windows; the log lets every window count. An option: the
+ * fit ranks by L (doc/decisions.md#robust-score). */
 int nds_replay_bounded(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
                        const nd_rollout *r, double k1, double k2, double robust,
                        double bound, nds_replay_terms *out, char *err, int errlen);

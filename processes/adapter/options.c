@@ -21,7 +21,7 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
   memcpy(o->ref, nd_theta_true, sizeof(o->ref));
   o->D = 1.0, o->seed = 1, o->nice = 10;
   /* Two record steps per model step: 3.5x faster than 1 ms, and re-anchoring keeps the
-   * coarse step's error from compounding (doc/decisions.md). */
+   * coarse step's error from compounding (doc/decisions.md#replay-dt). */
   o->replay_dt = 0.002;
   o->replay_mode = fc->replay.mode;
   o->replay_window = NDS_FIT_WINDOW_MOCAP;

@@ -10,8 +10,9 @@
 int main(int argc, char **argv) {
   planner_opts o = {.threads = ndp_default_threads(), .pop = 50, .iters = 2, .seed = 1,
                     .max_rate = 20.0, .state_timeout = 0.1};
-  /* 10 ms keeps one core at ~19 plans/s while pushing, twice the executor's 0.1 s plan
-   * timeout (doc/decisions.md); its prediction error is in nudge-bench. */
+  /* 10 ms, not the demo's 5 ms: on one core it plans at ~19 Hz while pushing, above the
+   * 10 Hz the executor's 0.1 s plan timeout needs; 5 ms did not reach that. Its cost in
+   * prediction error is in nudge-bench (doc/decisions.md#plan-dt). */
   o.plan_dt = 0.01;
   memcpy(o.theta, nd_theta_true, sizeof(o.theta));
   nds_planner_cfg pc;

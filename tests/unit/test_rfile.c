@@ -315,7 +315,7 @@ static void test_decode_rejects(void **state) {
   /* absurd n, before anything is sized from it */
   expect_reject(good, len, 0, p_n, 0, "n = 0");
   expect_reject(good, len, 0, p_n, -1, "n = -1");
-  expect_reject(good, len, 0, p_n, ND_ROLLOUT_MAX_STEPS + 1, "n = 600001");
+  expect_reject(good, len, 0, p_n, ND_ROLLOUT_MAX_STEPS + 1, "n = 480001");
   expect_reject(good, len, 0, p_n, 0x7fffffff, "n = 2147483647");
   /* n and the length disagree */
   expect_reject(good, len, 0, p_n, STEPS + 1, "needs exactly");
