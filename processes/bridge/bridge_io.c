@@ -12,24 +12,24 @@
 _Static_assert(BRIDGE_WS_MARGIN >= ND_EXEC_WS_MARGIN,
                "the bridge must accept every setpoint the executor may send");
 
-static void on_ee_cmd(const lcm_recv_buf_t *rbuf, const char *channel,
-                      const nudge_ee_cmd_t *msg, void *user) {
-  (void)rbuf;
-  (void)channel;
+/* An EE_CMD that does not decode or is invalid (ndp_validate). */
+static void refuse(void *user, const char *ch, const char *why) {
   bridge_io *io = user;
   io->st.received++;
-  char why[256];
-  if (ndp_check_ee_cmd(msg, why, sizeof(why))) {
-    io->st.rejected++;
-    ndp_refused(&io->refused, PROG, "EE_CMD", why);
-    return;
-  }
+  io->st.rejected++;
+  ndp_refused(&io->refused, PROG, ch, why);
+}
+
+static void use_ee_cmd(void *user, const nudge_ee_cmd_t *msg) {
+  bridge_io *io = user;
+  io->st.received++;
   /* Tracking a command that the executor would never send moves the robot where nothing
    * checked it may go: refused like an invalid one, so the newest valid command goes on
    * being tracked until it is stale, and then the robot holds. */
   for (int k = 0; k < 2; k++) {
     if (msg->p[k] >= io->ws.lo[k] - BRIDGE_WS_MARGIN && msg->p[k] <= io->ws.hi[k] + BRIDGE_WS_MARGIN)
       continue;
+    char why[256];
     snprintf(why, sizeof(why), "p (%.3f, %.3f) is outside the workspace x [%.3f, %.3f], "
              "y [%.3f, %.3f] m plus its %.2f m margin", msg->p[0], msg->p[1], io->ws.lo[0],
              io->ws.hi[0], io->ws.lo[1], io->ws.hi[1], BRIDGE_WS_MARGIN);
@@ -48,15 +48,7 @@ static void on_ee_cmd(const lcm_recv_buf_t *rbuf, const char *channel,
   nd_mailbox_post(&io->b->cmd, &c, sizeof(c));
 }
 
-/* Bytes on EE_CMD that are not one nudge_ee_cmd_t. */
-static void undecodable(void *user, const char *ch, const char *why) {
-  bridge_io *io = user;
-  io->st.received++;
-  io->st.rejected++;
-  ndp_refused(&io->refused, PROG, ch, why);
-}
-
-NDP_TYPED_HANDLER(nudge_ee_cmd_t, on_ee_cmd_raw, on_ee_cmd, undecodable)
+NDP_INPUT(nudge_ee_cmd_t, ndp_check_ee_cmd, on_ee_cmd_raw, use_ee_cmd, refuse)
 
 int bridge_io_subscribe(bridge_io *io, lcm_t *lcm, char *err, int errlen) {
   if (!lcm_subscribe(lcm, NDP_CH_EE_CMD, on_ee_cmd_raw, io)) {

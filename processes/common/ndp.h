@@ -111,6 +111,23 @@ void ndp_refused(ndp_ratelog *rl, const char *prog, const char *what, const char
     T##_decode_cleanup(&m_);                                                           \
   }
 
+/* NDP_INPUT(T, check, name, use, refuse) defines the lcm_subscribe callback `name` of an
+ * input channel of type T: the bytes are decoded as exactly one T (NDP_TYPED_HANDLER) and
+ * validated with check (ndp_validate.h's ndp_check_*); then use(user, &msg) does what the
+ * process does with a valid message, or refuse(user, channel, why) counts and logs a
+ * refused one. Every input message of every process passes here. */
+#define NDP_INPUT(T, check, name, use, refuse)                                         \
+  static void name##_valid_(const lcm_recv_buf_t *rb_, const char *ch_, const T *m_,   \
+                            void *user_) {                                             \
+    (void)rb_;                                                                         \
+    char why_[200];                                                                    \
+    if (check(m_, why_, (int)sizeof(why_)))                                            \
+      refuse(user_, ch_, why_);                                                        \
+    else                                                                               \
+      use(user_, m_);                                                                  \
+  }                                                                                    \
+  NDP_TYPED_HANDLER(T, name, name##_valid_, refuse)
+
 /* For NDP_TYPED_HANDLER: 0 when a decoder's result status consumed all size bytes, else
  * -1 with why saying so ("N bytes do not decode as T", "N bytes after a T"). */
 int ndp_decode_why(int status, int size, const char *type, char *why, int len);

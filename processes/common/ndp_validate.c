@@ -143,6 +143,19 @@ int ndp_check_params(const nudge_params_t *m, char *why, int len) {
   return 0;
 }
 
+int ndp_check_episode(const nudge_episode_t *m, char *why, int len) {
+  if (utime_ok(m->utime, why, len)) return -1;
+  if (m->task_id < 0) {
+    snprintf(why, len, "task_id = %lld is negative", (long long)m->task_id);
+    return -1;
+  }
+  if (m->event < NUDGE_EPISODE_T_EVENT_START || m->event > NUDGE_EPISODE_T_EVENT_STOPPED) {
+    snprintf(why, len, "event = %d is not a known event", m->event);
+    return -1;
+  }
+  return 0;
+}
+
 int ndp_check_arm_state(const nudge_arm_state_t *m, char *why, int len) {
   /* Bounds far beyond any arm's joints (a few rad, a few rad/s, hundreds of N m). */
   if (utime_ok(m->utime, why, len) || vec_ok(m->q, 7, 10.0, "q", why, len) ||
@@ -216,4 +229,11 @@ int ndp_decode_status(const void *buf, int len, nudge_status_t *m, char *why, in
     return -1;
   }
   return 0;
+}
+
+int ndp_take_episode(const void *buf, int len, nudge_episode_t *m, char *why, int wlen) {
+  if (ndp_decode_episode(buf, len, m, why, wlen)) return -1;
+  if (ndp_check_episode(m, why, wlen) == 0) return 0;
+  nudge_episode_t_decode_cleanup(m);
+  return -1;
 }

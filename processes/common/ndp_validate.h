@@ -35,6 +35,7 @@ int ndp_check_plan(const nudge_plan_t *m, char *why, int len);
 int ndp_check_task(const nudge_task_t *m, char *why, int len);
 int ndp_check_params(const nudge_params_t *m, char *why, int len);
 int ndp_check_arm_state(const nudge_arm_state_t *m, char *why, int len);
+int ndp_check_episode(const nudge_episode_t *m, char *why, int len);
 
 /* Decode EPISODE / STATUS bytes (the types with strings) without trusting them: the
  * decoders lcm-gen 1.3.1 generates take a string's length word as given, so a negative
@@ -44,6 +45,10 @@ int ndp_check_arm_state(const nudge_arm_state_t *m, char *why, int len);
  * nudge_X_t_decode_cleanup), or -1 with a reason and nothing to free. Subscribe with
  * lcm_subscribe and call these instead of nudge_X_t_subscribe. */
 int ndp_decode_episode(const void *buf, int len, nudge_episode_t *m, char *why, int wlen);
+
+/* ndp_decode_episode, then ndp_check_episode: 0 with *m decoded and valid (free with
+ * nudge_episode_t_decode_cleanup), or -1 with a reason and nothing to free. */
+int ndp_take_episode(const void *buf, int len, nudge_episode_t *m, char *why, int wlen);
 int ndp_decode_status(const void *buf, int len, nudge_status_t *m, char *why, int wlen);
 
 #endif

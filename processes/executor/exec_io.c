@@ -8,36 +8,28 @@
 
 #define PROG "nudge-executor"
 
-static void on_state(const lcm_recv_buf_t *rbuf, const char *ch,
-                     const nudge_robot_state_t *msg, void *user) {
-  (void)rbuf;
-  (void)ch;
+/* A refused input: undecodable, invalid (ndp_validate) or, for PLAN, made from a state
+ * older than its segment; each kind has its own rate-limited log. */
+static void refuse(void *user, const char *ch, const char *why) {
   exec_io *c = user;
-  char why[160];
   c->st.received++;
-  if (ndp_check_robot_state(msg, why, sizeof why)) {
-    c->st.rejected++;
-    ndp_refused(&c->log_state, PROG, "ROBOT_STATE", why);
-    return;
-  }
+  c->st.rejected++;
+  ndp_refused(strcmp(ch, NDP_CH_PLAN) ? &c->log_state : &c->log_plan, PROG, ch, why);
+}
+
+static void use_state(void *user, const nudge_robot_state_t *msg) {
+  exec_io *c = user;
+  c->st.received++;
   exec_loop_state_in in;
   in.t_arrive = ndp_sent_mono(msg->utime);
   memcpy(in.ee_pos, msg->ee_pos, sizeof in.ee_pos);
   nd_mailbox_post(&c->x->state, &in, (int)sizeof(in));
 }
 
-static void on_plan(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_plan_t *msg,
-                    void *user) {
-  (void)rbuf;
-  (void)ch;
+static void use_plan(void *user, const nudge_plan_t *msg) {
   exec_io *c = user;
   char why[160];
   c->st.received++;
-  if (ndp_check_plan(msg, why, sizeof why)) {
-    c->st.rejected++;
-    ndp_refused(&c->log_plan, PROG, "PLAN", why);
-    return;
-  }
   exec_loop_plan_in in;
   in.t_arrive = ndp_sent_mono(msg->utime);
   in.plan_id = msg->plan_id;
@@ -66,16 +58,8 @@ static void on_plan(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_plan
   nd_mailbox_post(&c->x->plan, &in, (int)sizeof(in));
 }
 
-/* Bytes on ROBOT_STATE or PLAN that are not one message of the channel's type. */
-static void undecodable(void *user, const char *ch, const char *why) {
-  exec_io *c = user;
-  c->st.received++;
-  c->st.rejected++;
-  ndp_refused(strcmp(ch, NDP_CH_PLAN) ? &c->log_state : &c->log_plan, PROG, ch, why);
-}
-
-NDP_TYPED_HANDLER(nudge_robot_state_t, on_state_raw, on_state, undecodable)
-NDP_TYPED_HANDLER(nudge_plan_t, on_plan_raw, on_plan, undecodable)
+NDP_INPUT(nudge_robot_state_t, ndp_check_robot_state, on_state_raw, use_state, refuse)
+NDP_INPUT(nudge_plan_t, ndp_check_plan, on_plan_raw, use_plan, refuse)
 
 int exec_io_subscribe(exec_io *io, lcm_t *lcm, char *err, int errlen) {
   if (!lcm_subscribe(lcm, NDP_CH_ROBOT_STATE, on_state_raw, io) ||

@@ -12,16 +12,16 @@ void planner_reject(planner_proc *p, const char *channel, const char *why) {
   ndp_refused(&p->rejected, PROG, channel, why);
 }
 
-static void on_mocap(const lcm_recv_buf_t *rb, const char *ch, const nudge_mocap_t *m,
-                     void *user) {
-  (void)rb;
+/* A refused input: undecodable, or invalid (ndp_validate). */
+static void refuse(void *user, const char *ch, const char *why) {
   planner_proc *p = user;
-  char why[160];
   p->st.received++;
-  if (ndp_check_mocap(m, why, sizeof(why))) {
-    planner_reject(p, ch, why);
-    return;
-  }
+  planner_reject(p, ch, why);
+}
+
+static void use_mocap(void *user, const nudge_mocap_t *m) {
+  planner_proc *p = user;
+  p->st.received++;
   /* A frame not newer than the last (a restarted publisher, a stepped clock) restarts the
    * estimate (nd_objest_add); otherwise a jump in seq counts the frames lost. */
   if (p->in_mocap.have && m->utime > p->mocap.utime && m->seq > p->mocap.seq + 1)
@@ -31,30 +31,16 @@ static void on_mocap(const lcm_recv_buf_t *rb, const char *ch, const nudge_mocap
   nd_objest_add(&p->est, m->utime, m->obj_pos, m->obj_quat);
 }
 
-static void on_robot_state(const lcm_recv_buf_t *rb, const char *ch,
-                           const nudge_robot_state_t *m, void *user) {
-  (void)rb;
+static void use_robot_state(void *user, const nudge_robot_state_t *m) {
   planner_proc *p = user;
-  char why[160];
   p->st.received++;
-  if (ndp_check_robot_state(m, why, sizeof(why))) {
-    planner_reject(p, ch, why);
-    return;
-  }
   p->rs = *m;
   ndp_input_got(&p->in_rs, m->utime);
 }
 
-static void on_ee_cmd(const lcm_recv_buf_t *rb, const char *ch, const nudge_ee_cmd_t *m,
-                      void *user) {
-  (void)rb;
+static void use_ee_cmd(void *user, const nudge_ee_cmd_t *m) {
   planner_proc *p = user;
-  char why[160];
   p->st.received++;
-  if (ndp_check_ee_cmd(m, why, sizeof(why))) {
-    planner_reject(p, ch, why);
-    return;
-  }
   p->cmd = *m;
   ndp_input_got(&p->in_cmd, m->utime);
 }
@@ -70,16 +56,9 @@ void planner_task_summary(planner_proc *p, const char *how) {
           (long long)(p->overflows - p->task_overflows0));
 }
 
-static void on_task(const lcm_recv_buf_t *rb, const char *ch, const nudge_task_t *m,
-                    void *user) {
-  (void)rb;
+static void use_task(void *user, const nudge_task_t *m) {
   planner_proc *p = user;
-  char why[160];
   p->st.received++;
-  if (ndp_check_task(m, why, sizeof(why))) {
-    planner_reject(p, ch, why);
-    return;
-  }
   /* A repeated TASK (re-sent for late joiners) neither restarts the warm start nor
    * revives a task whose end we have seen; its goal is the same by contract. */
   if ((p->active && m->task_id == p->task.task_id) ||
@@ -99,65 +78,38 @@ static void on_task(const lcm_recv_buf_t *rb, const char *ch, const nudge_task_t
           m->goal_yaw * 180.0 / ND_PI, m->eps, m->time_limit);
 }
 
-/* ndp_validate has no check for EPISODE; only task_id and event are used here. */
-static int check_episode(const nudge_episode_t *m, char *why, int len) {
-  if (m->utime <= 0) {
-    snprintf(why, len, "utime = %lld is not a time", (long long)m->utime);
-    return -1;
-  }
-  if (m->task_id < 0) {
-    snprintf(why, len, "task_id = %lld is negative", (long long)m->task_id);
-    return -1;
-  }
-  if (m->event < NUDGE_EPISODE_T_EVENT_START || m->event > NUDGE_EPISODE_T_EVENT_STOPPED) {
-    snprintf(why, len, "event = %d is not a known event", m->event);
-    return -1;
-  }
-  return 0;
-}
-
 /* Raw subscription: lcm-gen's stub would decode a lying string length and crash
- * (ndp_decode_episode); an undecodable message counts as rejected like a bad one. */
+ * (ndp_decode_episode). */
 static void on_episode(const lcm_recv_buf_t *rb, const char *ch, void *user) {
   planner_proc *p = user;
   char why[160];
   nudge_episode_t m;
+  if (ndp_take_episode(rb->data, (int)rb->data_size, &m, why, sizeof(why))) {
+    refuse(p, ch, why);
+    return;
+  }
   p->st.received++;
-  if (ndp_decode_episode(rb->data, (int)rb->data_size, &m, why, sizeof(why))) {
-    planner_reject(p, ch, why);
-    return;
-  }
-  const int bad = check_episode(&m, why, sizeof(why));
-  if (bad) planner_reject(p, ch, why);
-  if (bad || m.event == NUDGE_EPISODE_T_EVENT_START) {
-    nudge_episode_t_decode_cleanup(&m);
-    return;
-  }
-  p->have_ended = 1;
-  p->ended_id = m.task_id;
-  if (p->active && m.task_id == p->task.task_id) {
-    p->active = 0;
-    planner_task_summary(p, m.event == NUDGE_EPISODE_T_EVENT_SUCCESS   ? "succeeded"
-                            : m.event == NUDGE_EPISODE_T_EVENT_TIMEOUT ? "timed out"
-                            : m.event == NUDGE_EPISODE_T_EVENT_STOPPED ? "ended in a reflex stop"
-                                                                        : "was rejected");
+  if (m.event != NUDGE_EPISODE_T_EVENT_START) {
+    p->have_ended = 1;
+    p->ended_id = m.task_id;
+    if (p->active && m.task_id == p->task.task_id) {
+      p->active = 0;
+      planner_task_summary(p, m.event == NUDGE_EPISODE_T_EVENT_SUCCESS   ? "succeeded"
+                              : m.event == NUDGE_EPISODE_T_EVENT_TIMEOUT ? "timed out"
+                              : m.event == NUDGE_EPISODE_T_EVENT_STOPPED ? "ended in a reflex stop"
+                                                                          : "was rejected");
+    }
   }
   nudge_episode_t_decode_cleanup(&m);
 }
 
-static void on_params(const lcm_recv_buf_t *rb, const char *ch, const nudge_params_t *m,
-                      void *user) {
-  (void)rb;
+static void use_params(void *user, const nudge_params_t *m) {
   planner_proc *p = user;
   char why[160];
   p->st.received++;
-  if (ndp_check_params(m, why, sizeof(why))) {
-    planner_reject(p, ch, why);
-    return;
-  }
   if (m->version == p->theta_version) return;
   if (nds_planner_set_theta(p->planner, m->theta_mean, why, sizeof(why))) {
-    planner_reject(p, ch, why);
+    planner_reject(p, NDP_CH_PARAMS, why);
     return;
   }
   p->theta_version = m->version;
@@ -165,19 +117,11 @@ static void on_params(const lcm_recv_buf_t *rb, const char *ch, const nudge_para
           m->theta_mean[0], m->theta_mean[1], m->theta_mean[2], m->theta_mean[3]);
 }
 
-/* Bytes on a typed channel that are not one message of its type: counted and logged
- * like any refused input. */
-static void undecodable(void *user, const char *ch, const char *why) {
-  planner_proc *p = user;
-  p->st.received++;
-  planner_reject(p, ch, why);
-}
-
-NDP_TYPED_HANDLER(nudge_mocap_t, on_mocap_raw, on_mocap, undecodable)
-NDP_TYPED_HANDLER(nudge_robot_state_t, on_robot_state_raw, on_robot_state, undecodable)
-NDP_TYPED_HANDLER(nudge_ee_cmd_t, on_ee_cmd_raw, on_ee_cmd, undecodable)
-NDP_TYPED_HANDLER(nudge_task_t, on_task_raw, on_task, undecodable)
-NDP_TYPED_HANDLER(nudge_params_t, on_params_raw, on_params, undecodable)
+NDP_INPUT(nudge_mocap_t, ndp_check_mocap, on_mocap_raw, use_mocap, refuse)
+NDP_INPUT(nudge_robot_state_t, ndp_check_robot_state, on_robot_state_raw, use_robot_state, refuse)
+NDP_INPUT(nudge_ee_cmd_t, ndp_check_ee_cmd, on_ee_cmd_raw, use_ee_cmd, refuse)
+NDP_INPUT(nudge_task_t, ndp_check_task, on_task_raw, use_task, refuse)
+NDP_INPUT(nudge_params_t, ndp_check_params, on_params_raw, use_params, refuse)
 
 /* ---------------------------------------------------------------------------------- */
 

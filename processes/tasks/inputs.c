@@ -7,22 +7,16 @@
 
 #define RATE_QUEUE 1000 /* queue of the 1 kHz channels: a second of them */
 
-/* Count a refused message in the heartbeat and log it, rate-limited. */
-static void refuse(tasks_io *io, const char *what, const char *why) {
+/* A refused input: undecodable, or invalid (ndp_validate); counted and logged,
+ * rate-limited. */
+static void refuse(void *user, const char *ch, const char *why) {
+  tasks_io *io = user;
   io->st.rejected++;
-  ndp_refused(&io->refused, PROG, what, why);
+  ndp_refused(&io->refused, PROG, ch, why);
 }
 
-static void on_mocap(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_mocap_t *m,
-                     void *user) {
-  (void)rbuf;
-  (void)ch;
+static void use_mocap(void *user, const nudge_mocap_t *m) {
   tasks_io *io = user;
-  char why[200];
-  if (ndp_check_mocap(m, why, sizeof(why))) {
-    refuse(io, "MOCAP frame", why);
-    return;
-  }
   io->last = *m;
   io->t_last = ndp_mono();
   io->frames++;
@@ -46,16 +40,8 @@ static void on_mocap(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_moc
   }
 }
 
-static void on_robot_state(const lcm_recv_buf_t *rbuf, const char *ch,
-                           const nudge_robot_state_t *m, void *user) {
-  (void)rbuf;
-  (void)ch;
+static void use_robot_state(void *user, const nudge_robot_state_t *m) {
   tasks_io *io = user;
-  char why[200];
-  if (ndp_check_robot_state(m, why, sizeof(why))) {
-    refuse(io, "ROBOT_STATE", why);
-    return;
-  }
   io->st.received++;
   if (m->mode == NUDGE_ROBOT_STATE_T_MODE_STOPPED && io->run.id >= 0 && !io->run.stopped) {
     io->run.stopped = 1;
@@ -73,16 +59,8 @@ static void on_robot_state(const lcm_recv_buf_t *rbuf, const char *ch,
   nd_recorder_state(&io->buf->rec, s);
 }
 
-static void on_ee_cmd(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_ee_cmd_t *m,
-                      void *user) {
-  (void)rbuf;
-  (void)ch;
+static void use_ee_cmd(void *user, const nudge_ee_cmd_t *m) {
   tasks_io *io = user;
-  char why[200];
-  if (ndp_check_ee_cmd(m, why, sizeof(why))) {
-    refuse(io, "EE_CMD", why);
-    return;
-  }
   io->st.received++;
   nd_rec_setpoint sp;
   memcpy(sp.p, m->p, sizeof(sp.p));
@@ -91,48 +69,27 @@ static void on_ee_cmd(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_ee
   nd_recorder_setpoint(&io->buf->rec, &sp);
 }
 
-static void on_params(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_params_t *m,
-                      void *user) {
-  (void)rbuf;
-  (void)ch;
+static void use_params(void *user, const nudge_params_t *m) {
   tasks_io *io = user;
-  char why[200];
-  if (ndp_check_params(m, why, sizeof(why))) {
-    refuse(io, "PARAMS", why);
-    return;
-  }
   io->st.received++;
   memcpy(io->buf->theta, m->theta_mean, sizeof(io->buf->theta));
   io->buf->theta_version = m->version;
   io->buf->params_n = m->buffer_size;
 }
 
-static void on_plan(const lcm_recv_buf_t *rbuf, const char *ch, const nudge_plan_t *m,
-                    void *user) {
-  (void)rbuf;
-  (void)ch;
+static void use_plan(void *user, const nudge_plan_t *m) {
   tasks_io *io = user;
-  char why[200];
-  if (ndp_check_plan(m, why, sizeof(why))) {
-    refuse(io, "PLAN", why);
-    return;
-  }
   io->st.received++;
   if (m->task_id != io->run.id) return;
   io->run.plans++;
   if (io->nages < MAX_PLAN_AGES) io->ages[io->nages++] = 1e-3 * (double)(m->utime - m->state_utime);
 }
 
-/* Bytes on a typed channel that are not one message of its type. */
-static void undecodable(void *user, const char *ch, const char *why) {
-  refuse(user, ch, why);
-}
-
-NDP_TYPED_HANDLER(nudge_mocap_t, on_mocap_raw, on_mocap, undecodable)
-NDP_TYPED_HANDLER(nudge_robot_state_t, on_robot_state_raw, on_robot_state, undecodable)
-NDP_TYPED_HANDLER(nudge_ee_cmd_t, on_ee_cmd_raw, on_ee_cmd, undecodable)
-NDP_TYPED_HANDLER(nudge_params_t, on_params_raw, on_params, undecodable)
-NDP_TYPED_HANDLER(nudge_plan_t, on_plan_raw, on_plan, undecodable)
+NDP_INPUT(nudge_mocap_t, ndp_check_mocap, on_mocap_raw, use_mocap, refuse)
+NDP_INPUT(nudge_robot_state_t, ndp_check_robot_state, on_robot_state_raw, use_robot_state, refuse)
+NDP_INPUT(nudge_ee_cmd_t, ndp_check_ee_cmd, on_ee_cmd_raw, use_ee_cmd, refuse)
+NDP_INPUT(nudge_params_t, ndp_check_params, on_params_raw, use_params, refuse)
+NDP_INPUT(nudge_plan_t, ndp_check_plan, on_plan_raw, use_plan, refuse)
 
 int tasks_subscribe(tasks_io *io, lcm_t *lcm, char *err, int errlen) {
   /* The runner handles input every 20 ms and appends (one fdatasync) between tasks: a
