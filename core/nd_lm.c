@@ -1,6 +1,8 @@
 /* nd_lm: Levenberg-Marquardt with batched forward differences (nd_lm.h). */
 #include "nd_lm.h"
 
+#include "nd_linalg.h"
+
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -77,31 +79,11 @@ static double sumsq(const double *r, int m) {
 
 static double clampd(double v, double lo, double hi) { return v < lo ? lo : v > hi ? hi : v; }
 
-/* Solve the symmetric positive definite A (n x n, destroyed) x = b by Cholesky. 0, or -1
+/* Solve the symmetric positive definite A (n x n, destroyed) x = b in place. 0, or -1
  * when A is not positive definite. */
-static int chol_solve(double *A, int n, double *b) {
-  for (int j = 0; j < n; j++) {
-    double d = A[j * n + j];
-    for (int k = 0; k < j; k++) d -= A[j * n + k] * A[j * n + k];
-    if (!(d > 0)) return -1;
-    d = sqrt(d);
-    A[j * n + j] = d;
-    for (int i = j + 1; i < n; i++) {
-      double s = A[i * n + j];
-      for (int k = 0; k < j; k++) s -= A[i * n + k] * A[j * n + k];
-      A[i * n + j] = s / d;
-    }
-  }
-  for (int i = 0; i < n; i++) {
-    double s = b[i];
-    for (int k = 0; k < i; k++) s -= A[i * n + k] * b[k];
-    b[i] = s / A[i * n + i];
-  }
-  for (int i = n - 1; i >= 0; i--) {
-    double s = b[i];
-    for (int k = i + 1; k < n; k++) s -= A[k * n + i] * b[k];
-    b[i] = s / A[i * n + i];
-  }
+static int spd_solve(double *A, int n, double *b) {
+  if (nd_chol(A, n)) return -1;
+  nd_chol_solve(A, n, b, b);
   return 0;
 }
 
@@ -177,7 +159,7 @@ int nd_lm_run(nd_lm *lm, nd_lm_fn fn, void *ctx, double *x, nd_lm_out *out, char
       M[a * n + a] += lambda * (A[a * n + a] > 0 ? A[a * n + a] : 1.0);
       dx[a] = -g[a];
     }
-    if (chol_solve(M, n, dx)) break;
+    if (spd_solve(M, n, dx)) break;
     for (int a = 0; a < n; a++) xt[a] = clampd(x[a] + dx[a] * lm->scale[a], lm->lower[a], lm->upper[a]);
     make_batch(lm, xt, h);
     if (fn(ctx, lm->pts, n + 1, lm->res)) goto aborted;
@@ -208,7 +190,7 @@ int nd_lm_run(nd_lm *lm, nd_lm_fn fn, void *ctx, double *x, nd_lm_out *out, char
     double M[N_MAX * N_MAX], col[N_MAX] = {0};
     memcpy(M, A, sizeof(double) * n * n);
     col[b] = 1.0;
-    if (chol_solve(M, n, col)) out->rank_ok = 0;
+    if (spd_solve(M, n, col)) out->rank_ok = 0;
     for (int a = 0; a < n; a++)
       out->cov[a * n + b] = col[a] * out->sigma2 * out->inflation * lm->scale[a] * lm->scale[b];
   }

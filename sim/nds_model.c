@@ -4,41 +4,23 @@
 #include "nd_parse.h"
 
 #include <math.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-/* The sphere floats this far above the table: it never touches it (contact excluded),
- * the gap only keeps the two apart when drawn. */
-#define NDS_EE_GAP 0.001
-
 /* Where the sphere starts in the generated scene (qpos0), clear of the object at the
  * origin, so qpos0 is a valid non-penetrating configuration for mj_setConst. */
 #define NDS_EE_X0 (-0.3)
-
-/* Solver settings of the generated scene. Newton converges in a few iterations on a
- * handful of contacts; the cap only matters when it does not, where more iterations buy
- * nothing a 20 Hz re-plan needs. The elliptic cone makes torsional and rolling friction
- * the physical cone of theta rather than its pyramid approximation: it costs ~40% more
- * per step than pyramidal, and the two disagree by ~1 cm / 0.1 rad on a 10 cm push.
- * No noslip: it would add a second solver pass for a drift the soft contacts tolerate.
- * (doc/decisions.md#scene-solver) */
-#define NDS_ITERATIONS 20
-#define NDS_TOLERANCE 1e-8
-
-/* Box-on-plane gives at most 4 contacts and the sphere 1 more; the default sizes (100
- * contacts, 500 rows, ~10 MB of stack) would make every per-worker mjData ~13 MB instead
- * of ~1.3 MB. A full
- * contact list shows up as a MuJoCo warning, which rollouts report as divergence; the
- * stack (an overflow is a fatal mju_error) keeps ~150x the ~600 mjtNums a push uses. */
-#define NDS_NCONMAX 32
-#define NDS_NSTACK 100000
 
 void nds_scene_cfg_default(nds_scene_cfg *cfg) {
   cfg->obj_half[0] = 0.05;
   cfg->obj_half[1] = 0.03;
   cfg->obj_half[2] = 0.025;
   cfg->obj_mass = 0.5;
+  cfg->obj_com[0] = cfg->obj_com[1] = cfg->obj_com[2] = 0.0;
+  cfg->solref[0] = 0.02, cfg->solref[1] = 1.0;
+  cfg->solimp[0] = 0.9, cfg->solimp[1] = 0.95, cfg->solimp[2] = 0.001;
   cfg->ee_radius = 0.025;
   cfg->timestep = 0.001;
   cfg->condim = 6;
@@ -72,6 +54,23 @@ int nds_scene_cfg_check(const nds_scene_cfg *cfg, char *err, int errlen) {
     snprintf(err, errlen, "scene: condim = %d: must be 3, 4 or 6", cfg->condim);
     return -1;
   }
+  for (int i = 0; i < 3; i++)
+    if (!(isfinite(cfg->obj_com[i]) && fabs(cfg->obj_com[i]) <= cfg->obj_half[i])) {
+      snprintf(err, errlen, "scene: obj_com[%d] = %g: must lie inside the box", i,
+               cfg->obj_com[i]);
+      return -1;
+    }
+  if (!(positive(cfg->solref[0]) && positive(cfg->solref[1]) && cfg->solref[0] < 1)) {
+    snprintf(err, errlen, "scene: solref %g %g: need a time constant in (0, 1) s and a "
+             "damping ratio > 0", cfg->solref[0], cfg->solref[1]);
+    return -1;
+  }
+  if (!(cfg->solimp[0] > 0 && cfg->solimp[0] <= cfg->solimp[1] && cfg->solimp[1] < 1 &&
+        positive(cfg->solimp[2]))) {
+    snprintf(err, errlen, "scene: solimp %g %g %g: need 0 < d0 <= dwidth < 1 and a width > 0",
+             cfg->solimp[0], cfg->solimp[1], cfg->solimp[2]);
+    return -1;
+  }
   if (!(isfinite(cfg->tilt_damping) && cfg->tilt_damping >= 0)) {
     snprintf(err, errlen, "scene: tilt_damping = %g: must be finite and >= 0",
              cfg->tilt_damping);
@@ -88,49 +87,75 @@ int nds_scene_cfg_check(const nds_scene_cfg *cfg, char *err, int errlen) {
   return nd_theta_check(cfg->theta, err, errlen);
 }
 
+/* Append printf output at buf[*at]. Return 0, or -1 if it does not fit. */
+static int put(char *buf, int len, int *at, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+static int put(char *buf, int len, int *at, const char *fmt, ...) {
+  va_list ap;
+  va_start(ap, fmt);
+  const int n = *at < len ? vsnprintf(buf + *at, (size_t)(len - *at), fmt, ap) : -1;
+  va_end(ap);
+  if (n < 0 || *at + n >= len) return -1;
+  *at += n;
+  return 0;
+}
+
+int nds_scene_xml_head(const nds_scene_cfg *cfg, const char *name, char *buf, int len,
+                       int *at) {
+  const double *th = cfg->theta;
+  return put(buf, len, at,
+             "<mujoco model=\"%s\">\n"
+             "  <compiler angle=\"radian\"/>\n"
+             "  <option timestep=\"%.17g\" integrator=\"Euler\" cone=\"elliptic\" "
+             "solver=\"Newton\" iterations=\"%d\" tolerance=\"%g\" noslip_iterations=\"0\"/>\n"
+             "  <size nconmax=\"%d\" njmax=\"%d\" nstack=\"%d\"/>\n"
+             "  <default>\n"
+             "    <geom condim=\"%d\" friction=\"%.17g %.17g %.17g\" solref=\"%.17g %.17g\" "
+             "solimp=\"%.17g %.17g %.17g\"/>\n"
+             "  </default>\n"
+             "  <worldbody>\n"
+             "    <geom name=\"table\" type=\"plane\" size=\"1 1 0.05\"/>\n",
+             name, cfg->timestep, NDS_ITERATIONS, NDS_TOLERANCE, NDS_NCONMAX,
+             NDS_NCONMAX * 6, NDS_NSTACK, cfg->condim, th[ND_TH_SLIDE], th[ND_TH_TORSION],
+             th[ND_TH_ROLL], cfg->solref[0], cfg->solref[1], cfg->solimp[0], cfg->solimp[1],
+             cfg->solimp[2]);
+}
+
+int nds_scene_xml_object(const nds_scene_cfg *cfg, char *buf, int len, int *at) {
+  const double *h = cfg->obj_half, *c = cfg->obj_com, m = cfg->obj_mass;
+  /* Uniform solid box: I = m/3 (b^2 + c^2) in half sizes, about its centre; an offset
+   * centre of mass keeps that tensor (a box with a denser part). */
+  return put(buf, len, at,
+             "    <body name=\"object\" pos=\"0 0 %.17g\">\n"
+             "      <freejoint name=\"object\"/>\n"
+             "      <inertial pos=\"%.17g %.17g %.17g\" mass=\"%.17g\" "
+             "diaginertia=\"%.17g %.17g %.17g\"/>\n"
+             "      <geom name=\"object\" type=\"box\" size=\"%.17g %.17g %.17g\"/>\n"
+             "    </body>\n",
+             h[2], c[0], c[1], c[2], m, m / 3 * (h[1] * h[1] + h[2] * h[2]),
+             m / 3 * (h[0] * h[0] + h[2] * h[2]), m / 3 * (h[0] * h[0] + h[1] * h[1]), h[0],
+             h[1], h[2]);
+}
+
 int nds_scene_xml(const nds_scene_cfg *cfg, char *buf, int len, char *err, int errlen) {
   if (nds_scene_cfg_check(cfg, err, errlen)) return -1;
-  const double *h = cfg->obj_half, *th = cfg->theta;
-  double m = cfg->obj_mass;
-  /* Uniform solid box: I = m/3 (b^2 + c^2) in half sizes. */
-  double ix = m / 3 * (h[1] * h[1] + h[2] * h[2]);
-  double iy = m / 3 * (h[0] * h[0] + h[2] * h[2]);
-  double iz = m / 3 * (h[0] * h[0] + h[1] * h[1]);
-  double ee_z = cfg->ee_radius + NDS_EE_GAP;
-  int n = snprintf(
-      buf, len,
-      "<mujoco model=\"nudge_push\">\n"
-      "  <compiler angle=\"radian\"/>\n"
-      "  <option timestep=\"%.17g\" integrator=\"Euler\" cone=\"elliptic\" "
-      "solver=\"Newton\" iterations=\"%d\" tolerance=\"%g\" noslip_iterations=\"0\"/>\n"
-      "  <size nconmax=\"%d\" njmax=\"%d\" nstack=\"%d\"/>\n"
-      "  <default>\n"
-      "    <geom condim=\"%d\" friction=\"%.17g %.17g %.17g\"/>\n"
-      "  </default>\n"
-      "  <worldbody>\n"
-      "    <geom name=\"table\" type=\"plane\" size=\"1 1 0.05\"/>\n"
-      "    <body name=\"object\" pos=\"0 0 %.17g\">\n"
-      "      <freejoint name=\"object\"/>\n"
-      "      <inertial pos=\"0 0 0\" mass=\"%.17g\" diaginertia=\"%.17g %.17g %.17g\"/>\n"
-      "      <geom name=\"object\" type=\"box\" size=\"%.17g %.17g %.17g\"/>\n"
-      "    </body>\n"
-      "    <body name=\"ee\" pos=\"%.17g 0 %.17g\">\n"
-      "      <joint name=\"ee_x\" type=\"slide\" axis=\"1 0 0\" ref=\"%.17g\"/>\n"
-      "      <joint name=\"ee_y\" type=\"slide\" axis=\"0 1 0\"/>\n"
-      "      <geom name=\"ee\" type=\"sphere\" size=\"%.17g\" mass=\"%.17g\"/>\n"
-      "    </body>\n"
-      "  </worldbody>\n"
-      "  <contact>\n"
-      "    <exclude body1=\"world\" body2=\"ee\"/>\n"
-      "  </contact>\n"
-      "</mujoco>\n",
-      cfg->timestep, NDS_ITERATIONS, NDS_TOLERANCE,                       /* option */
-      NDS_NCONMAX, NDS_NCONMAX * 6, NDS_NSTACK,                           /* size */
-      cfg->condim, th[ND_TH_SLIDE], th[ND_TH_TORSION], th[ND_TH_ROLL], /* default */
-      h[2], m, ix, iy, iz, h[0], h[1], h[2],                              /* object */
-      NDS_EE_X0, ee_z, NDS_EE_X0, cfg->ee_radius, th[ND_TH_MASS]);       /* ee */
-  if (n < 0 || n >= len) {
-    snprintf(err, errlen, "scene: XML needs %d bytes, buffer has %d", n + 1, len);
+  int at = 0;
+  const double ee_z = cfg->ee_radius + NDS_EE_GAP;
+  if (nds_scene_xml_head(cfg, "nudge_push", buf, len, &at) ||
+      nds_scene_xml_object(cfg, buf, len, &at) ||
+      put(buf, len, &at,
+          "    <body name=\"ee\" pos=\"%.17g 0 %.17g\">\n"
+          "      <joint name=\"ee_x\" type=\"slide\" axis=\"1 0 0\" ref=\"%.17g\"/>\n"
+          "      <joint name=\"ee_y\" type=\"slide\" axis=\"0 1 0\"/>\n"
+          "      <geom name=\"ee\" type=\"sphere\" size=\"%.17g\" mass=\"%.17g\"/>\n"
+          "    </body>\n"
+          "  </worldbody>\n"
+          "  <contact>\n"
+          "    <exclude body1=\"world\" body2=\"ee\"/>\n"
+          "  </contact>\n"
+          "</mujoco>\n",
+          NDS_EE_X0, ee_z, NDS_EE_X0, cfg->ee_radius, cfg->theta[ND_TH_MASS])) {
+    snprintf(err, errlen, "scene: XML does not fit %d bytes", len);
     return -1;
   }
   return 0;

@@ -11,10 +11,24 @@
 
 #include "nd_theta.h"
 
+/* The sphere's centre floats this far above the table: it never touches it (contact
+ * excluded); the gap only keeps the two apart when drawn. */
+#define NDS_EE_GAP 0.001
+
+/* Solver and sizes of the generated scenes (doc/decisions.md#scene-solver): Newton with an
+ * elliptic cone, capped iterations; a box on a plane makes at most 4 contacts and the
+ * sphere 1 more, so small contact and stack sizes keep each mjData ~1.3 MB, not ~13 MB. */
+#define NDS_ITERATIONS 20
+#define NDS_TOLERANCE 1e-8
+#define NDS_NCONMAX 32
+#define NDS_NSTACK 100000
 
 typedef struct {
   double obj_half[3];    /* cuboid half sizes (x, y, z), m */
   double obj_mass;       /* kg */
+  double obj_com[3];     /* centre of mass in the box frame, m (the planning model's: 0) */
+  double solref[2];      /* contact softness: time constant (s), damping ratio */
+  double solimp[3];      /* contact impedance: d0, dwidth, width (m) */
   double ee_radius;      /* m */
   double timestep;       /* s */
   int condim;            /* 3, 4 or 6: torsional needs >= 4, rolling needs 6 */
@@ -22,8 +36,9 @@ typedef struct {
   double theta[ND_NTHETA];
 } nds_scene_cfg;
 
-/* Defaults: 10 x 6 x 5 cm, 0.5 kg box; 2.5 cm sphere; 1 ms; condim 6; tilt damping 0.1;
- * nd_theta_true. The tilt damping keeps a sliding box from rocking on its soft corner
+/* Defaults: 10 x 6 x 5 cm, 0.5 kg box with its centre of mass in the middle; MuJoCo's
+ * default contact softness (solref 0.02 1, solimp 0.9 0.95 0.001); 2.5 cm sphere; 1 ms;
+ * condim 6; tilt damping 0.1; nd_theta_true. The tilt damping keeps a sliding box from rocking on its soft corner
  * contacts at coarse timesteps (MuJoCo's Euler integrates it implicitly), which worsened
  * the planning model's prediction; it leaves yaw and translation free, and a box that
  * stays flat, as a pushed box does, never feels it (doc/decisions.md#tilt-damping). */
@@ -47,6 +62,14 @@ int nds_scene_cfg_check(const nds_scene_cfg *cfg, char *err, int errlen);
 
 /* Write the scene's MJCF for cfg into buf. Return 0, or -1 with a message. */
 int nds_scene_xml(const nds_scene_cfg *cfg, char *buf, int len, char *err, int errlen);
+
+/* The pieces other scenes (the lab world's) share with it, each appended at buf[*at]:
+ * the head (<mujoco> to <worldbody> with the table: solver, sizes, cfg's condim, theta's
+ * frictions and contact softness for every geom) and the object's body. Return 0, or -1 if
+ * buf (len bytes) is full. */
+int nds_scene_xml_head(const nds_scene_cfg *cfg, const char *name, char *buf, int len,
+                       int *at);
+int nds_scene_xml_object(const nds_scene_cfg *cfg, char *buf, int len, int *at);
 
 /* Build the model of cfg (validated, theta applied; tilt_damping is set on the model after
  * loading, since MJCF damps all six dofs of a free joint alike). Return 0, or -1 with a

@@ -1,0 +1,712 @@
+/* test_panda: the emulated Panda's model, kinematics, IK, control and reflexes. */
+#include <stdlib.h>
+#include <string.h>
+
+#include "nd_snap.h"
+#include "nd_test.h"
+#include "nds_panda.h"
+
+#define NJ NDS_PANDA_NJ
+#define DT 0.001
+
+/* Franka's "ready" posture: the IK seed the default rest posture came from. */
+static const double ready[NJ] = {0, -0.78539816, 0, -2.35619449, 0, 1.57079633, 0.78539816};
+
+#define assert_contains(s, sub)                                                       \
+  do {                                                                                \
+    if (!strstr((s), (sub))) fail_msg("\"%s\" does not mention \"%s\"", (s), (sub)); \
+  } while (0)
+
+/* A loaded scene with the arm resolved and at its rest posture. */
+typedef struct {
+  nds_panda_cfg cfg;
+  mjModel *m;
+  mjData *d;
+  nds_panda p;
+} world;
+
+static void world_open(world *w, int with_box) {
+  char err[512] = "";
+  nds_panda_cfg_default(&w->cfg);
+  w->m = nds_panda_scene_load(&w->cfg, NULL, with_box, err, sizeof(err));
+  if (!w->m) fail_msg("scene: %s", err);
+  if (nds_panda_resolve(&w->p, w->m, &w->cfg, err, sizeof(err)))
+    fail_msg("resolve: %s", err);
+  w->d = mj_makeData(w->m);
+  assert_non_null(w->d);
+  nds_panda_set_q(&w->p, w->m, w->d, w->cfg.q_rest);
+}
+
+static void world_close(world *w) {
+  mj_deleteData(w->d);
+  mj_deleteModel(w->m);
+}
+
+/* Deterministic uniform numbers in [0, 1) (64-bit LCG, top 53 bits). */
+static double uniform(uint64_t *s) {
+  *s = *s * 6364136223846793005ULL + 1442695040888963407ULL;
+  return (double)(*s >> 11) / 9007199254740992.0;
+}
+
+static double dist3(const double *a, const double *b) {
+  return sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) +
+              (a[2] - b[2]) * (a[2] - b[2]));
+}
+
+static int cmp_double(const void *a, const void *b) {
+  double x = *(const double *)a, y = *(const double *)b;
+  return x < y ? -1 : x > y;
+}
+
+/* ---- model ---- */
+
+static void test_model_structure(void **state) {
+  (void)state;
+  world w;
+  world_open(&w, 1);
+  const mjModel *m = w.m;
+  assert_int_equal(m->nu, NJ);
+  assert_int_equal(m->nv, NJ + 6);
+  assert_near(m->opt.timestep, DT, 0);
+  assert_int_equal(m->opt.integrator, mjINT_EULER);
+  for (int i = 0; i < NJ; i++) {
+    int j = m->dof_jntid[w.p.dof[i]];
+    assert_near(m->jnt_range[2 * j], nds_panda_q_min[i], 0);
+    assert_near(m->jnt_range[2 * j + 1], nds_panda_q_max[i], 0);
+    assert_near(m->actuator_ctrlrange[2 * w.p.act[i] + 1], nds_panda_tau_max[i], 0);
+    assert_true(m->jnt_limited[j]);
+  }
+  /* Gaz et al., supplementary Table VIII: 16.062132 kg of links, plus the tool. */
+  double mass = 0;
+  for (int i = 1; i <= NJ; i++) mass += m->body_mass[w.p.body[i]];
+  assert_near(mass, 16.062132, 1e-9);
+  assert_near(m->body_mass[w.p.body_tool], w.cfg.tool_mass, 1e-12);
+  /* Link 4's centre of mass (Table VIII) and its inertia about it (Table IX) in DH frame
+   * 4: rebuilt from MuJoCo's principal axes, the tensor must be the published one, which
+   * checks the fullinertia ordering (xx yy zz xy xz yz against the table's xx xy xz yy yz
+   * zz) and that the body frame is the DH frame. */
+  int b = w.p.body[4];
+  assert_near(m->body_ipos[3 * b + 0], -5.317e-02, 1e-12);
+  assert_near(m->body_ipos[3 * b + 1], 1.04419e-01, 1e-12);
+  assert_near(m->body_ipos[3 * b + 2], 2.7454e-02, 1e-12);
+  double R[9], I[9];
+  mju_quat2Mat(R, m->body_iquat + 4 * b);
+  for (int r = 0; r < 3; r++)
+    for (int c = 0; c < 3; c++) {
+      I[3 * r + c] = 0;
+      for (int k = 0; k < 3; k++)
+        I[3 * r + c] += R[3 * r + k] * m->body_inertia[3 * b + k] * R[3 * c + k];
+    }
+  const double gaz4[9] = {2.5853e-02,  7.7960e-03, -1.3320e-03, 7.7960e-03, 1.9552e-02,
+                          8.6410e-03, -1.3320e-03, 8.6410e-03,  2.8323e-02};
+  for (int k = 0; k < 9; k++) assert_near(I[k], gaz4[k], 1e-7); /* mju_eig3's precision */
+  /* Only the sphere collides; the sphere-world pair is excluded. */
+  for (int g = 0; g < m->ngeom; g++) {
+    int arm = m->geom_bodyid[g] >= w.p.body[0];
+    if (arm && g != w.p.geom_sphere) {
+      assert_int_equal(m->geom_contype[g], 0);
+      assert_int_equal(m->geom_conaffinity[g], 0);
+    }
+  }
+  assert_int_equal(m->geom_contype[w.p.geom_sphere], 1);
+  assert_near(m->geom_size[3 * w.p.geom_sphere], w.cfg.ee_radius, 0);
+  /* A cfg that is not the model's arm is refused. */
+  char err[256] = "";
+  nds_panda_cfg other = w.cfg;
+  nds_panda p2;
+  other.tool_length = 0.15;
+  assert_int_equal(nds_panda_resolve(&p2, m, &other, err, sizeof(err)), -1);
+  assert_contains(err, "away from cfg");
+  world_close(&w);
+}
+
+/* A controller sized for one model refuses another's mjData rather than overrun. */
+static void test_ctrl_model_mismatch(void **state) {
+  (void)state;
+  world a, b;
+  world_open(&a, 1);
+  world_open(&b, 0);
+  char err[256] = "";
+  nds_panda_gains g;
+  nds_panda_gains_default(&g);
+  nds_panda_ctrl c;
+  if (nds_panda_ctrl_init(&c, a.m, &g, err, sizeof(err))) fail_msg("%s", err);
+  double p[3] = {-0.1, 0, 0.026}, v[3] = {0, 0, 0}, tau[NJ];
+  mj_forward(b.m, b.d);
+  assert_int_equal(nds_panda_ctrl_impedance(&c, &b.p, b.m, b.d, p, v, NULL, tau), -1);
+  for (int i = 0; i < NJ; i++) assert_near(tau[i], b.d->qfrc_bias[b.p.dof[i]], 0);
+  mj_forward(a.m, a.d);
+  assert_int_equal(nds_panda_ctrl_impedance(&c, &a.p, a.m, a.d, p, v, NULL, tau), 0);
+  nds_panda_ctrl_free(&c);
+  g.k_t = -1;
+  assert_int_equal(nds_panda_ctrl_init(&c, a.m, &g, err, sizeof(err)), -1);
+  assert_contains(err, "gain k_t = -1");
+  nds_panda_ctrl_free(&c); /* harmless on a refused one */
+  world_close(&a);
+  world_close(&b);
+}
+
+/* The pieces an integrator drops into its own scene load and resolve, under a <default>
+ * of its own; without the <exclude>, resolve refuses. */
+static void test_xml_pieces(void **state) {
+  (void)state;
+  nds_panda_cfg cfg;
+  nds_panda_cfg_default(&cfg);
+  char body[8192], contact[512], act[2048], err[256] = "", xml[16384];
+  assert_int_equal(nds_panda_xml_body(&cfg, body, sizeof(body), err, sizeof(err)), 0);
+  assert_int_equal(nds_panda_xml_contact(contact, sizeof(contact), err, sizeof(err)), 0);
+  assert_int_equal(nds_panda_xml_actuator(act, sizeof(act), err, sizeof(err)), 0);
+  assert_contains(contact, "body2=\"panda_tool\"");
+  char small[100];
+  assert_int_equal(nds_panda_xml_body(&cfg, small, sizeof(small), err, sizeof(err)), -1);
+  assert_contains(err, "buffer has 100");
+
+  for (int with_exclude = 1; with_exclude >= 0; with_exclude--) {
+    snprintf(xml, sizeof(xml),
+             "<mujoco><default><geom condim=\"4\"/><joint damping=\"5\"/></default>"
+             "<worldbody><geom name=\"table\" type=\"plane\" size=\"1 1 .1\"/>"
+             "%s</worldbody>"
+             "<contact>%s</contact><actuator>%s</actuator></mujoco>",
+             body, with_exclude ? contact : "", act);
+    char lerr[512] = "";
+    mjVFS *vfs = malloc(sizeof(mjVFS));
+    assert_non_null(vfs);
+    mj_defaultVFS(vfs);
+    assert_int_equal(mj_makeEmptyFileVFS(vfs, "s.xml", (int)strlen(xml)), 0);
+    memcpy(vfs->filedata[mj_findFileVFS(vfs, "s.xml")], xml, strlen(xml));
+    mjModel *m = mj_loadXML("s.xml", vfs, lerr, sizeof(lerr));
+    mj_deleteVFS(vfs);
+    free(vfs);
+    if (!m) fail_msg("load: %s", lerr);
+    nds_panda p;
+    int rc = nds_panda_resolve(&p, m, &cfg, err, sizeof(err));
+    if (with_exclude) {
+      if (rc) fail_msg("resolve: %s", err);
+      /* The pieces state their joint properties, so the scene's default is not taken. */
+      assert_near(m->dof_damping[p.dof[3]], 0.1, 0);
+    } else {
+      assert_int_equal(rc, -1);
+      assert_contains(err, "exclude");
+    }
+    mj_deleteModel(m);
+  }
+}
+
+static void test_cfg_check(void **state) {
+  (void)state;
+  nds_panda_cfg c0, c;
+  char err[256] = "";
+  nds_panda_cfg_default(&c0);
+  assert_int_equal(nds_panda_cfg_check(&c0, err, sizeof(err)), 0);
+  c = c0, c.ee_radius = 0;
+  assert_int_equal(nds_panda_cfg_check(&c, err, sizeof(err)), -1);
+  assert_contains(err, "ee_radius");
+  c = c0, c.tool_length = 0.04;
+  assert_int_equal(nds_panda_cfg_check(&c, err, sizeof(err)), -1);
+  assert_contains(err, "tool_length");
+  c = c0, c.q_rest[3] = 0;
+  assert_int_equal(nds_panda_cfg_check(&c, err, sizeof(err)), -1);
+  assert_contains(err, "joint 4");
+  c = c0, c.base_pos[2] = NAN;
+  assert_int_equal(nds_panda_cfg_check(&c, err, sizeof(err)), -1);
+  assert_near(nds_panda_push_height(&c0), 0.026, 1e-15);
+}
+
+/* ---- kinematics ---- */
+
+/* The plain-C DH kinematics against MuJoCo's bodies and sites, on random postures within
+ * the limits, for the default base and for a moved, yawed one. */
+static void test_fk_matches_mujoco(void **state) {
+  (void)state;
+  for (int variant = 0; variant < 2; variant++) {
+    char err[512] = "";
+    nds_panda_cfg cfg;
+    nds_panda_cfg_default(&cfg);
+    if (variant) {
+      cfg.base_pos[0] = 0.3, cfg.base_pos[1] = -0.7, cfg.base_pos[2] = 0.1;
+      cfg.base_yaw = 2.1, cfg.tool_length = 0.12;
+    }
+    mjModel *m = nds_panda_scene_load(&cfg, NULL, 0, err, sizeof(err));
+    if (!m) fail_msg("%s", err);
+    nds_panda p;
+    if (nds_panda_resolve(&p, m, &cfg, err, sizeof(err))) fail_msg("%s", err);
+    mjData *d = mj_makeData(m);
+    mjtNum jacp[3 * NJ], jacr[3 * NJ];
+    uint64_t seed = 12345 + variant;
+    double worst_p = 0, worst_r = 0, worst_j = 0;
+    for (int n = 0; n < 300; n++) {
+      double q[NJ], fpos[3], fR[9], tool[3], J[35];
+      for (int i = 0; i < NJ; i++)
+        q[i] = nds_panda_q_min[i] +
+               (nds_panda_q_max[i] - nds_panda_q_min[i]) * uniform(&seed);
+      for (int i = 0; i < NJ; i++) d->qpos[p.qpos[i]] = q[i];
+      mj_kinematics(m, d);
+      mj_comPos(m, d);
+      nds_panda_fk(&cfg, q, fpos, fR, tool);
+      worst_p = fmax(worst_p, dist3(fpos, d->site_xpos + 3 * p.site_flange));
+      worst_p = fmax(worst_p, dist3(tool, d->site_xpos + 3 * p.site_tool));
+      for (int k = 0; k < 9; k++)
+        worst_r = fmax(worst_r, fabs(fR[k] - d->site_xmat[9 * p.site_flange + k]));
+      /* Link 4's body frame is DH frame 4: its origin is joint 4's, on its axis. */
+      nds_panda_jac(&cfg, q, J);
+      mj_jacSite(m, d, jacp, jacr, p.site_tool);
+      for (int i = 0; i < NJ; i++) {
+        for (int r = 0; r < 3; r++)
+          worst_j = fmax(worst_j, fabs(J[r * NJ + i] - jacp[r * m->nv + p.dof[i]]));
+        for (int r = 0; r < 2; r++)
+          worst_j = fmax(worst_j, fabs(J[(3 + r) * NJ + i] - jacr[r * m->nv + p.dof[i]]));
+      }
+    }
+    assert_near(worst_p, 0, 1e-9);
+    assert_near(worst_r, 0, 1e-9);
+    assert_near(worst_j, 0, 1e-9);
+    mj_deleteData(d);
+    mj_deleteModel(m);
+  }
+}
+
+/* Every point of the workspace on a 5 cm grid: an IK solution with the tool down, inside
+ * the joint margins, from which 0.5 m/s and 2 m/s^2 stay within the joint limits. */
+static void test_ik_workspace_grid(void **state) {
+  (void)state;
+  nds_panda_cfg cfg;
+  nds_panda_cfg_default(&cfg);
+  const double z = nds_panda_push_height(&cfg);
+  char err[256] = "";
+  double q[NJ], tool[3], R[9];
+  /* The rest posture is the sphere's start pose, and IK from "ready" finds it again. */
+  double start[3] = {-0.10, 0, z};
+  assert_int_equal(nds_panda_ik(&cfg, start, ready, q, err, sizeof(err)), 0);
+  for (int i = 0; i < NJ; i++) assert_near(q[i], cfg.q_rest[i], 1e-4);
+  int n = 0;
+  double worst_v = 0, worst_a = 0;
+  for (double x = NDS_PANDA_WS_XMIN; x <= NDS_PANDA_WS_XMAX + 1e-9; x += 0.05) {
+    for (double y = NDS_PANDA_WS_YMIN; y <= NDS_PANDA_WS_YMAX + 1e-9; y += 0.05) {
+      double t[3] = {x, y, z};
+      if (nds_panda_ik(&cfg, t, NULL, q, err, sizeof(err))) fail_msg("%s", err);
+      nds_panda_fk(&cfg, q, NULL, R, tool);
+      assert_near(dist3(tool, t), 0, 1e-8);
+      assert_near(R[8], -1, 1e-12); /* tool axis straight down */
+      for (int i = 0; i < NJ; i++) {
+        assert_true(q[i] >= nds_panda_q_min[i] + NDS_PANDA_IK_MARGIN);
+        assert_true(q[i] <= nds_panda_q_max[i] - NDS_PANDA_IK_MARGIN);
+      }
+      worst_v = fmax(worst_v, nds_panda_speed_ratio(&cfg, q, NDS_PANDA_WS_SPEED));
+      worst_a = fmax(worst_a, nds_panda_accel_ratio(&cfg, q, NDS_PANDA_WS_ACCEL));
+      n++;
+    }
+  }
+  assert_int_equal(n, 7 * 15);
+  print_message("workspace: worst speed ratio %.3f, worst accel ratio %.3f\n", worst_v,
+                worst_a);
+  assert_true(worst_v <= NDS_PANDA_WS_SPEED_RATIO);
+  assert_true(worst_a <= 1.0);
+
+  /* Out of reach, and too close to the base for the joint margins. */
+  double far[3] = {0.8, 0, z}, near[3] = {-0.30, 0.05, z};
+  assert_int_equal(nds_panda_ik(&cfg, far, NULL, q, err, sizeof(err)), -1);
+  assert_contains(err, "unreachable");
+  assert_int_equal(nds_panda_ik(&cfg, near, NULL, q, err, sizeof(err)), -1);
+  assert_contains(err, "IK: (-0.300");
+}
+
+/* ---- control ---- */
+
+/* Typical pushing keypoints (x, y, vx, vy) in the workspace; each min-snap segment starts
+ * at 0.3 s and is stretched by 10% steps until it stays within 0.5 m/s and 2 m/s^2, as
+ * the executor stretches its segments to its limits. */
+static const double keys[][4] = {
+    {0.00, 0.00, 0.3, 0.0},    {0.10, 0.02, 0.2, 0.1},     {0.10, 0.15, -0.1, 0.3},
+    {0.00, 0.30, -0.3, 0.0},   {-0.12, 0.25, -0.1, -0.3},  {-0.12, 0.00, 0.0, -0.3},
+    {-0.10, -0.25, 0.3, 0.0},  {0.10, -0.15, 0.0, 0.3},    {-0.10, 0.0, 0, 0}};
+#define NKEYS ((int)(sizeof(keys) / sizeof(keys[0])))
+
+typedef struct {
+  double err_p50, err_p99, err_max; /* sphere centre to setpoint, m */
+  double z_min;                     /* lowest sphere centre, m */
+  int sat;                          /* OR of the controller's saturation masks */
+  int reflexes;                     /* cycles the monitor flagged */
+  nds_panda_reflex first;           /* the first one */
+  int table_contacts, box_contacts; /* contacts of the sphere summed over steps */
+  double q_end[NJ];
+} run_stats;
+
+static double errs[20000];
+
+/* Track the keypoints (or the first nkeys of them) from the rest posture, a_limit the
+ * segments' acceleration bound, then hold the last one for 0.5 s. */
+static void run_keys(world *w, const nds_panda_gains *g, int nkeys, double a_limit,
+                     int accel_window, run_stats *st) {
+  char err[256] = "";
+  nds_panda_ctrl c;
+  if (nds_panda_ctrl_init(&c, w->m, g, err, sizeof(err))) fail_msg("%s", err);
+  nds_panda_monitor mo;
+  nds_panda_monitor_reset(&mo, DT, accel_window);
+  memset(st, 0, sizeof(*st));
+  st->z_min = INFINITY;
+  const double z = nds_panda_push_height(&w->cfg);
+  double s0[2][4] = {{-0.10, 0, 0, 0}, {0, 0, 0, 0}};
+  int ne = 0;
+  for (int k = 0; k < nkeys; k++) {
+    nd_snap_seg seg;
+    const double p1[2] = {keys[k][0], keys[k][1]}, v1[2] = {keys[k][2], keys[k][3]};
+    double T = 0.3;
+    for (;; T *= 1.1) {
+      T = ceil(T / DT - 1e-9) * DT;
+      nd_snap_seg_make(&seg, s0, p1, v1, T);
+      double pv = 0, pa = 0, sp[2][4];
+      for (int n = 0; n <= 200; n++) {
+        nd_snap_seg_eval(&seg, T * n / 200, sp);
+        pv = fmax(pv, hypot(sp[0][ND_V], sp[1][ND_V]));
+        pa = fmax(pa, hypot(sp[0][ND_A], sp[1][ND_A]));
+      }
+      if (pv <= 0.5 && pa <= a_limit) break;
+    }
+    int steps = (int)lround(T / DT) + (k == nkeys - 1 ? 500 : 0);
+    for (int n = 1; n <= steps; n++) {
+      double sp[2][4], tau[NJ], q[NJ], dq[NJ];
+      nd_snap_seg_eval(&seg, n * DT, sp);
+      const double pd[3] = {sp[0][ND_P], sp[1][ND_P], z};
+      const double vd[3] = {sp[0][ND_V], sp[1][ND_V], 0};
+      const double ad[3] = {sp[0][ND_A], sp[1][ND_A], 0};
+      mj_step1(w->m, w->d);
+      const double *s = w->d->site_xpos + 3 * w->p.site_tool;
+      double e = dist3(s, pd);
+      assert_true(ne < (int)(sizeof(errs) / sizeof(errs[0])));
+      errs[ne++] = e;
+      st->err_max = fmax(st->err_max, e);
+      st->z_min = fmin(st->z_min, s[2]);
+      st->sat |= nds_panda_ctrl_impedance(&c, &w->p, w->m, w->d, pd, vd, ad, tau);
+      nds_panda_get_q(&w->p, w->d, q, dq);
+      nds_panda_reflex r;
+      if (nds_panda_monitor_check(&mo, q, dq, pd, &r) && st->reflexes++ == 0) st->first = r;
+      nds_panda_apply(&w->p, w->d, tau);
+      mj_step2(w->m, w->d);
+      for (int i = 0; i < w->d->ncon; i++) {
+        int g1 = w->d->contact[i].geom1, g2 = w->d->contact[i].geom2;
+        if (g1 != w->p.geom_sphere && g2 != w->p.geom_sphere) continue;
+        int other = g1 == w->p.geom_sphere ? g2 : g1;
+        if (w->m->geom_bodyid[other] == 0)
+          st->table_contacts++;
+        else
+          st->box_contacts++;
+      }
+    }
+    nd_snap_seg_eval(&seg, T, s0);
+  }
+  qsort(errs, ne, sizeof(double), cmp_double);
+  st->err_p50 = errs[ne / 2];
+  st->err_p99 = errs[(int)(0.99 * ne)];
+  nds_panda_get_q(&w->p, w->d, st->q_end, NULL);
+  nds_panda_ctrl_free(&c);
+}
+
+/* Free space: the sphere follows the segments within a millimetre and a half, no joint
+ * needs its torque clamped and no reflex (joint accelerations over single cycles
+ * included) trips; the null-space pull brings the elbow and wrist back to rest, where
+ * without it they wander off. */
+static void test_tracking_and_nullspace(void **state) {
+  (void)state;
+  world w;
+  world_open(&w, 0);
+  nds_panda_gains g;
+  nds_panda_gains_default(&g);
+  run_stats st;
+  run_keys(&w, &g, NKEYS, 2.0, 1, &st);
+  print_message("free space: error p50 %.2f mm, p99 %.2f mm, max %.2f mm\n",
+                1e3 * st.err_p50, 1e3 * st.err_p99, 1e3 * st.err_max);
+  assert_true(st.err_p99 < 1.5e-3);
+  assert_true(st.err_max < 2e-3);
+  assert_int_equal(st.sat, 0);
+  assert_int_equal(st.reflexes, 0);
+  assert_true(st.z_min > w.cfg.ee_radius);
+  for (int i = 0; i < NJ; i++) assert_near(st.q_end[i], w.cfg.q_rest[i], 0.02);
+
+  /* Elbow drift without the null-space pull: the same run ends with joint 1 turned
+   * well away from rest (the self-motion is unconstrained). */
+  world_close(&w);
+  world_open(&w, 0);
+  g.k_ns = g.d_ns = 0;
+  run_keys(&w, &g, NKEYS, 2.0, 1, &st);
+  double drift = 0;
+  for (int i = 0; i < NJ; i++) drift = fmax(drift, fabs(st.q_end[i] - w.cfg.q_rest[i]));
+  print_message("without null space: largest joint drift %.3f rad\n", drift);
+  assert_true(drift > 0.1);
+  world_close(&w);
+}
+
+/* Pushing the 0.5 kg box: the sphere strikes and pushes it forward, yields a few
+ * millimetres to it (more than in free space, never a centimetre), never touches the
+ * table, never needs a clamped torque, and trips no reflex with the pushing window for
+ * joint accelerations, where single cycles would (the impact). */
+static void test_push_box(void **state) {
+  (void)state;
+  world w;
+  world_open(&w, 1);
+  nds_panda_gains g;
+  nds_panda_gains_default(&g);
+  run_stats st;
+  run_keys(&w, &g, NKEYS, 2.0, NDS_PANDA_ACCEL_WINDOW_PUSH, &st);
+  print_message("push: error p50 %.2f mm, p99 %.2f mm, max %.2f mm; box at (%.3f, %.3f)\n",
+                1e3 * st.err_p50, 1e3 * st.err_p99, 1e3 * st.err_max, w.d->qpos[0],
+                w.d->qpos[1]);
+  assert_true(st.box_contacts > 100);
+  assert_int_equal(st.table_contacts, 0);
+  assert_true(w.d->qpos[0] > 0.1); /* the box went forward */
+  assert_true(st.err_max > 2e-3);  /* compliant: it gives way to the box */
+  assert_true(st.err_p99 < 5e-3);
+  assert_true(st.z_min > w.cfg.ee_radius);
+  assert_int_equal(st.sat, 0);
+  assert_int_equal(st.reflexes, 0);
+  world_close(&w);
+
+  world_open(&w, 1);
+  run_keys(&w, &g, NKEYS, 2.0, 1, &st);
+  assert_true(st.reflexes > 0);
+  assert_int_equal(st.first.kind, NDS_PANDA_REFLEX_JOINT_ACCELERATION);
+  world_close(&w);
+}
+
+/* A fast sweep across the workspace within the Cartesian limits (1.2 m/s, ~5 m/s^2):
+ * the arm tracks it until a joint passes libfranka's velocity limit, which the reflex
+ * check names. With single-cycle joint accelerations checked, an acceleration limit
+ * breaks first. */
+static void test_reflex_on_fast_segment(void **state) {
+  (void)state;
+  for (int window = 0; window <= 1; window++) {
+    world w;
+    world_open(&w, 0);
+    char err[256] = "", name[64];
+    nds_panda_gains g;
+    nds_panda_gains_default(&g);
+    nds_panda_ctrl c;
+    if (nds_panda_ctrl_init(&c, w.m, &g, err, sizeof(err))) fail_msg("%s", err);
+    nds_panda_monitor mo;
+    nds_panda_monitor_reset(&mo, DT, window);
+    const double z = nds_panda_push_height(&w.cfg);
+    double q[NJ], start[3] = {-0.10, -0.20, z};
+    if (nds_panda_ik(&w.cfg, start, NULL, q, err, sizeof(err))) fail_msg("%s", err);
+    nds_panda_set_q(&w.p, w.m, w.d, q);
+    double s0[2][4] = {{-0.10, 0, 0, 0}, {-0.20, 0, 0, 0}};
+    const double p1[2] = {-0.10, 0.30}, v1[2] = {0, 0};
+    nd_snap_seg seg;
+    nd_snap_seg_make(&seg, s0, p1, v1, 0.9);
+    nds_panda_reflex r = {NDS_PANDA_REFLEX_NONE, -1, 0, 0};
+    int n;
+    for (n = 1; n <= 900; n++) {
+      double sp[2][4], tau[NJ], dq[NJ];
+      nd_snap_seg_eval(&seg, n * DT, sp);
+      const double pd[3] = {sp[0][ND_P], sp[1][ND_P], z};
+      const double vd[3] = {sp[0][ND_V], sp[1][ND_V], 0};
+      const double ad[3] = {sp[0][ND_A], sp[1][ND_A], 0};
+      mj_step1(w.m, w.d);
+      nds_panda_ctrl_impedance(&c, &w.p, w.m, w.d, pd, vd, ad, tau);
+      nds_panda_get_q(&w.p, w.d, q, dq);
+      if (nds_panda_monitor_check(&mo, q, dq, pd, &r)) break;
+      nds_panda_apply(&w.p, w.d, tau);
+      mj_step2(w.m, w.d);
+    }
+    print_message("window %d: reflex \"%s\" at %d ms: %.3f (limit %.3f)\n", window,
+                  nds_panda_reflex_name(&r, name, sizeof(name)), n, r.value, r.limit);
+    assert_true(n <= 900);
+    assert_int_equal(r.kind, window ? NDS_PANDA_REFLEX_JOINT_ACCELERATION
+                                    : NDS_PANDA_REFLEX_JOINT_VELOCITY);
+    assert_in_range(r.joint, 0, NJ - 1);
+    assert_true(fabs(r.value) > fabs(r.limit));
+    if (!window) {
+      /* The broken limit is libfranka's kMaxJointVelocity for that joint. */
+      double lim =
+          nds_panda_dq_max[r.joint] - 1e-3 - 3e-3 * (nds_panda_ddq_max[r.joint] - 1e-3);
+      assert_near(fabs(r.limit), lim, 1e-12);
+      char want[32];
+      snprintf(want, sizeof(want), "joint %d velocity", r.joint + 1);
+      assert_string_equal(name, want);
+    }
+    nds_panda_ctrl_free(&c);
+    world_close(&w);
+  }
+}
+
+/* The brake law stops an arm moving at ~0.4 m/s and then holds it: over the second after
+ * it has settled (0.5 s) the sphere moves less than a millimetre. */
+static void test_brake_holds(void **state) {
+  (void)state;
+  world w;
+  world_open(&w, 0);
+  char err[256] = "";
+  nds_panda_gains g;
+  nds_panda_gains_default(&g);
+  nds_panda_ctrl c;
+  if (nds_panda_ctrl_init(&c, w.m, &g, err, sizeof(err))) fail_msg("%s", err);
+  const double z = nds_panda_push_height(&w.cfg);
+  double s0[2][4] = {{-0.10, 0, 0, 0}, {0, 0, 0, 0}};
+  const double p1[2] = {0.10, 0.10}, v1[2] = {0, 0};
+  nd_snap_seg seg;
+  nd_snap_seg_make(&seg, s0, p1, v1, 1.2);
+  double tau[NJ], q_hold[NJ], dq[NJ], speed = 0;
+  for (int n = 1; n <= 600; n++) { /* half-way: at top speed */
+    double sp[2][4];
+    nd_snap_seg_eval(&seg, n * DT, sp);
+    const double pd[3] = {sp[0][ND_P], sp[1][ND_P], z};
+    const double vd[3] = {sp[0][ND_V], sp[1][ND_V], 0};
+    const double ad[3] = {sp[0][ND_A], sp[1][ND_A], 0};
+    mj_step1(w.m, w.d);
+    nds_panda_ctrl_impedance(&c, &w.p, w.m, w.d, pd, vd, ad, tau);
+    nds_panda_apply(&w.p, w.d, tau);
+    mj_step2(w.m, w.d);
+    speed = hypot(sp[0][ND_V], sp[1][ND_V]);
+  }
+  assert_true(speed > 0.3);
+  nds_panda_get_q(&w.p, w.d, q_hold, NULL);
+  double p_settled[3] = {0}, p_end[3];
+  for (int n = 1; n <= 1500; n++) {
+    mj_step1(w.m, w.d);
+    int sat = nds_panda_ctrl_brake(&w.p, w.d, q_hold, tau);
+    (void)sat;
+    nds_panda_apply(&w.p, w.d, tau);
+    mj_step2(w.m, w.d);
+    if (n == 500) memcpy(p_settled, w.d->site_xpos + 3 * w.p.site_tool, sizeof(p_settled));
+  }
+  mj_forward(w.m, w.d);
+  memcpy(p_end, w.d->site_xpos + 3 * w.p.site_tool, sizeof(p_end));
+  nds_panda_get_q(&w.p, w.d, NULL, dq);
+  print_message("brake: drift over 1 s after settling %.4f mm\n",
+                1e3 * dist3(p_end, p_settled));
+  assert_true(dist3(p_end, p_settled) < 1e-3);
+  for (int i = 0; i < NJ; i++) assert_near(dq[i], 0, 1e-3);
+  nds_panda_ctrl_free(&c);
+  world_close(&w);
+}
+
+/* ---- reflexes on synthetic inputs ---- */
+
+static int check(nds_panda_monitor *mo, const double q[NJ], const double dq[NJ],
+                 const double p[3], nds_panda_reflex *r) {
+  return nds_panda_monitor_check(mo, q, dq, p, r);
+}
+
+static void test_reflex_kinds(void **state) {
+  (void)state;
+  nds_panda_cfg cfg;
+  nds_panda_cfg_default(&cfg);
+  nds_panda_monitor mo;
+  nds_panda_reflex r;
+  char name[64];
+  double q[NJ], dq[NJ] = {0}, p[3] = {0, 0, 0.026};
+  memcpy(q, cfg.q_rest, sizeof(q));
+
+  /* Joint position: within kLimitEps of joint 4's upper limit. */
+  nds_panda_monitor_reset(&mo, DT, 1);
+  q[3] = nds_panda_q_max[3] - 0.5e-3;
+  assert_int_equal(check(&mo, q, dq, p, &r), 1);
+  assert_int_equal(r.kind, NDS_PANDA_REFLEX_JOINT_POSITION);
+  assert_int_equal(r.joint, 3);
+  assert_near(r.limit, nds_panda_q_max[3] - 1e-3, 1e-15);
+  assert_string_equal(nds_panda_reflex_name(&r, name, sizeof(name)), "joint 4 position");
+  q[3] = cfg.q_rest[3];
+
+  /* Joint velocity: 2.15 rad/s on joint 4 is past kMaxJointVelocity (2.1365). */
+  nds_panda_monitor_reset(&mo, DT, 0);
+  dq[3] = -2.15;
+  assert_int_equal(check(&mo, q, dq, p, &r), 1);
+  assert_int_equal(r.kind, NDS_PANDA_REFLEX_JOINT_VELOCITY);
+  assert_near(r.value, -2.15, 0);
+  assert_near(r.limit, -(2.175 - 1e-3 - 3e-3 * (12.5 - 1e-3)), 1e-12);
+  assert_string_equal(nds_panda_reflex_name(&r, name, sizeof(name)), "joint 4 velocity");
+  dq[3] = 2.12;
+  assert_int_equal(check(&mo, q, dq, p, &r), 0);
+  dq[3] = 0;
+
+  /* Joint acceleration: joint 2 gains 0.02 rad/s in one cycle (20 rad/s^2 > 7.5); over
+   * a 10-cycle window the same change reads 2 rad/s^2. */
+  nds_panda_monitor_reset(&mo, DT, 1);
+  assert_int_equal(check(&mo, q, dq, p, &r), 0);
+  dq[1] = 0.02;
+  assert_int_equal(check(&mo, q, dq, p, &r), 1);
+  assert_int_equal(r.kind, NDS_PANDA_REFLEX_JOINT_ACCELERATION);
+  assert_int_equal(r.joint, 1);
+  assert_near(r.value, 20, 1e-9);
+  assert_string_equal(nds_panda_reflex_name(&r, name, sizeof(name)),
+                      "joint 2 acceleration");
+  nds_panda_monitor_reset(&mo, DT, 10);
+  dq[1] = 0;
+  for (int k = 0; k < 10; k++) assert_int_equal(check(&mo, q, dq, p, &r), 0);
+  dq[1] = 0.02;
+  for (int k = 0; k < 10; k++) assert_int_equal(check(&mo, q, dq, p, &r), 0);
+  dq[1] = 0;
+
+  /* Cartesian velocity: a 1 cm setpoint step is 10 m/s; 1.65 m/s passes, 1.67 does not
+   * (kMaxTranslationalVelocity 1.66). */
+  nds_panda_monitor_reset(&mo, DT, 0);
+  assert_int_equal(check(&mo, q, dq, p, &r), 0);
+  p[0] += 0.01;
+  assert_int_equal(check(&mo, q, dq, p, &r), 1);
+  assert_int_equal(r.kind, NDS_PANDA_REFLEX_CART_VELOCITY);
+  assert_int_equal(r.joint, -1);
+  assert_near(r.value, 10, 1e-9);
+  assert_string_equal(nds_panda_reflex_name(&r, name, sizeof(name)), "Cartesian velocity");
+  for (int pass = 0; pass < 2; pass++) {
+    double v = pass ? 1.67 : 1.65;
+    nds_panda_monitor_reset(&mo, DT, 0);
+    int broke = 0;
+    for (int k = 0; k < 10; k++) {
+      double pk[3] = {v * k * DT, 0, 0.026};
+      broke |= check(&mo, q, dq, pk, &r);
+    }
+    assert_int_equal(broke, pass);
+  }
+
+  /* Cartesian acceleration: from rest at 13.5 m/s^2 breaks on the third sample, where the
+   * second difference first exists. */
+  nds_panda_monitor_reset(&mo, DT, 0);
+  for (int k = 0; k < 3; k++) {
+    double pk[3] = {0.5 * 13.5 * (k * DT) * (k * DT), 0, 0.026};
+    int rc = check(&mo, q, dq, pk, &r);
+    assert_int_equal(rc, k == 2);
+  }
+  assert_int_equal(r.kind, NDS_PANDA_REFLEX_CART_ACCELERATION);
+  assert_near(r.value, 13.5, 1e-6);
+  assert_string_equal(nds_panda_reflex_name(&r, name, sizeof(name)),
+                      "Cartesian acceleration");
+
+  /* Cartesian jerk: positions J dt^3 C(k, 3) have third difference J and second J dt
+   * (6.6 m/s^2): J = 6600 breaks the 6500 m/s^3 limit alone, 6400 passes. */
+  for (int pass = 0; pass < 2; pass++) {
+    double J = pass ? 6600 : 6400;
+    nds_panda_monitor_reset(&mo, DT, 0);
+    int broke = 0;
+    for (int k = 0; k < 4; k++) {
+      double pk[3] = {J * DT * DT * DT * k * (k - 1) * (k - 2) / 6, 0, 0.026};
+      broke |= check(&mo, q, dq, pk, &r);
+    }
+    assert_int_equal(broke, pass);
+    if (pass) {
+      assert_int_equal(r.kind, NDS_PANDA_REFLEX_CART_JERK);
+      assert_near(r.value, 6600, 1e-3);
+      assert_string_equal(nds_panda_reflex_name(&r, name, sizeof(name)), "Cartesian jerk");
+    }
+  }
+
+  /* Not finite. */
+  nds_panda_monitor_reset(&mo, DT, 1);
+  p[1] = NAN;
+  assert_int_equal(check(&mo, q, dq, p, &r), 1);
+  assert_int_equal(r.kind, NDS_PANDA_REFLEX_NONFINITE);
+}
+
+int main(void) {
+  const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_model_structure),
+      cmocka_unit_test(test_xml_pieces),
+      cmocka_unit_test(test_ctrl_model_mismatch),
+      cmocka_unit_test(test_cfg_check),
+      cmocka_unit_test(test_fk_matches_mujoco),
+      cmocka_unit_test(test_ik_workspace_grid),
+      cmocka_unit_test(test_tracking_and_nullspace),
+      cmocka_unit_test(test_push_box),
+      cmocka_unit_test(test_reflex_on_fast_segment),
+      cmocka_unit_test(test_brake_holds),
+      cmocka_unit_test(test_reflex_kinds),
+  };
+  return cmocka_run_group_tests(tests, NULL, NULL);
+}
