@@ -84,6 +84,7 @@ int nd_mocap_capture(nd_mocap *m, double t, const double obj_pos[3], const doubl
     m->n--;
   }
   nd_mocap_frame *f = &m->q[(m->head + m->n) % ND_MOCAP_QUEUE];
+  f->index = m->captured + m->dropped;
   f->t_capture = t;
   f->t_release = t + c->latency + c->latency_jitter * (2.0 * nd_rng_uniform(&m->rng) - 1.0);
   memcpy(f->obj_quat, obj_quat, sizeof(f->obj_quat));

@@ -44,6 +44,8 @@ void nd_mocap_cfg_exact(nd_mocap_cfg *cfg);
 int nd_mocap_cfg_check(const nd_mocap_cfg *cfg, char *err, int errlen);
 
 typedef struct {
+  int64_t index;          /* the camera's frame number: frames due since init, 0 first;
+                           * a dropped frame's number is skipped */
   double t_capture;       /* s, the world's time of the capture */
   double t_release;       /* s, when it may be published */
   double obj_pos[3], obj_quat[4];  /* w-first, unit */

@@ -155,7 +155,7 @@ int nds_scene_xml(const nds_scene_cfg *cfg, char *buf, int len, char *err, int e
           "  </contact>\n"
           "</mujoco>\n",
           NDS_EE_X0, ee_z, NDS_EE_X0, cfg->ee_radius, cfg->theta[ND_TH_MASS])) {
-    snprintf(err, errlen, "scene: XML does not fit %d bytes", len);
+    snprintf(err, errlen, "scene: XML does not fit, buffer has %d bytes", len);
     return -1;
   }
   return 0;

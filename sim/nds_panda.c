@@ -253,7 +253,7 @@ double nds_panda_accel_ratio(const nds_panda_cfg *cfg, const double q[NJ], doubl
 
 /* ---- configuration ---- */
 
-/* The lab world's arm (see panda.md for the search behind it). */
+/* The lab world's arm (doc/lab-world.md#reach has the search behind it). */
 void nds_panda_cfg_default(nds_panda_cfg *cfg) {
   /* IK of the sphere start (-0.10, 0, 0.026) from Franka's "ready" posture (0, -pi/4, 0,
    * -3 pi/4, 0, pi/2, pi/4): elbow up over the table edge, wrist flipped down. */
@@ -262,7 +262,7 @@ void nds_panda_cfg_default(nds_panda_cfg *cfg) {
   memset(cfg, 0, sizeof(*cfg));
   /* Behind the workspace, 0.30 m below the table top: the shoulder (0.333 above the base)
    * then sits at table height, which gives the widest band of sphere positions reachable
-   * at 0.5 m/s (panda.md). */
+   * at 0.5 m/s (doc/lab-world.md#reach). */
   cfg->base_pos[0] = -0.30;
   cfg->base_pos[1] = 0.05;
   cfg->base_pos[2] = -0.30;
@@ -484,7 +484,7 @@ int nds_panda_scene_xml(const nds_panda_cfg *cfg, const nds_scene_cfg *scene, in
   writer w = {buf, len, 0};
   if (nds_scene_xml_head(scene, "nudge_lab", buf, len, &w.pos) ||
       (with_box && nds_scene_xml_object(scene, buf, len, &w.pos))) {
-    snprintf(err, errlen, "panda: scene MJCF does not fit %d bytes", len);
+    snprintf(err, errlen, "panda: scene MJCF does not fit, buffer has %d bytes", len);
     return -1;
   }
   put_arm(&w, cfg);

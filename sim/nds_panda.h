@@ -44,8 +44,8 @@ extern const double nds_panda_dh_alpha[NDS_PANDA_NJ];
  * which the sphere can move at 0.5 m/s in any horizontal direction with every joint below
  * 90% of its velocity limit, and accelerate from rest at 2 m/s^2 within the joint
  * acceleration limits (joint 2's 7.5 rad/s^2 binds there: 2 m/s^2 is the arm's figure, not
- * a margin). Smaller than the 0.7 x 0.8 m asked for: no upright Panda outside that region
- * reaches all of it at 0.5 m/s (panda.md). */
+ * a margin). Smaller than the ideal world's box: no upright Panda beside the table
+ * serves a 0.7 x 0.8 m region at 0.5 m/s (doc/lab-world.md#reach). */
 #define NDS_PANDA_WS_XMIN (-0.15)
 #define NDS_PANDA_WS_XMAX 0.15
 #define NDS_PANDA_WS_YMIN (-0.30)
@@ -258,7 +258,7 @@ void nds_panda_monitor_reset(nds_panda_monitor *mo, double dt, int accel_window)
 
 /* The window for an arm that pushes. The sphere striking the 0.5 kg box reads as joint 6
  * accelerating at 4.6 times its limit over 1 ms, 1.8 over 10 ms, 0.94 over 20 ms and 0.41
- * over 50 ms (panda.md): an impact is a contact force, not a motion the arm was commanded,
+ * over 50 ms (doc/lab-world.md#reflexes): an impact is a contact force, not a motion the arm was commanded,
  * and a sustained excess still shows within 50 ms. */
 #define NDS_PANDA_ACCEL_WINDOW_PUSH 50
 

@@ -14,7 +14,7 @@
 /* ---- control ---- */
 
 /* Gains. Over the workspace the sphere's task inertia (the position rows of (J M^-1 J')^-1
- * with the tilt rows held) is 4-13 kg (panda.md). K_T 2000 N/m makes the arm yield
+ * with the tilt rows held) is 4-13 kg (doc/lab-world.md#controller). K_T 2000 N/m makes the arm yield
  * ~2.5 mm to the ~5 N of a 0.5 kg box sliding at friction 1, as a compliant arm should;
  * D_T = 2 sqrt(K_T m) with m = 8 kg damps it about critically (libfranka's example's
  * rule, 2 sqrt(K), with the unit mass it assumes replaced by the arm's). K_R 150 N m/rad

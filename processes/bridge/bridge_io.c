@@ -42,17 +42,32 @@ static void use_ee_cmd(void *user, const nudge_ee_cmd_t *msg) {
     c.p[k] = msg->p[k];
     c.v[k] = msg->v[k];
     c.a[k] = msg->a[k];
+    c.j[k] = msg->j[k];
   }
   c.arrival = ndp_mono();
+  c.utime = msg->utime;
   c.seq = msg->seq;
   nd_mailbox_post(&io->b->cmd, &c, sizeof(c));
 }
 
+/* A new task releases an arm a reflex stopped, as the real robot resumes on the next
+ * motion command after its error is acknowledged. */
+static void use_task(void *user, const nudge_task_t *msg) {
+  bridge_io *io = user;
+  io->st.received++;
+  if (msg->task_id == io->task_id) return;  /* re-sent for late joiners */
+  io->task_id = msg->task_id;
+  atomic_fetch_add(&io->b->resume_req, 1);
+}
+
 NDP_INPUT(nudge_ee_cmd_t, ndp_check_ee_cmd, on_ee_cmd_raw, use_ee_cmd, refuse)
+NDP_INPUT(nudge_task_t, ndp_check_task, on_task_raw, use_task, refuse)
 
 int bridge_io_subscribe(bridge_io *io, lcm_t *lcm, char *err, int errlen) {
-  if (!lcm_subscribe(lcm, NDP_CH_EE_CMD, on_ee_cmd_raw, io)) {
-    snprintf(err, errlen, "cannot subscribe to %s", NDP_CH_EE_CMD);
+  io->task_id = -1;
+  if (!lcm_subscribe(lcm, NDP_CH_EE_CMD, on_ee_cmd_raw, io) ||
+      !lcm_subscribe(lcm, NDP_CH_TASK, on_task_raw, io)) {
+    snprintf(err, errlen, "cannot subscribe to %s and %s", NDP_CH_EE_CMD, NDP_CH_TASK);
     return -1;
   }
   return 0;
@@ -61,7 +76,9 @@ int bridge_io_subscribe(bridge_io *io, lcm_t *lcm, char *err, int errlen) {
 int bridge_io_publish(bridge_io *io, lcm_t *lcm) {
   int tag, n, failed = 0;
   while ((n = nd_ring_pop(&io->b->out, &tag, io->buf, sizeof(io->buf))) >= 0) {
-    const char *ch = tag == BRIDGE_TAG_MOCAP ? NDP_CH_MOCAP : NDP_CH_ROBOT_STATE;
+    const char *ch = tag == BRIDGE_TAG_MOCAP       ? NDP_CH_MOCAP
+                     : tag == BRIDGE_TAG_ARM_STATE ? NDP_CH_ARM_STATE
+                                                   : NDP_CH_ROBOT_STATE;
     if (lcm_publish(lcm, ch, io->buf, (unsigned)n) == 0) io->st.published++;
     else failed++;
   }
@@ -94,5 +111,18 @@ void bridge_io_report(bridge_io *io, uint64_t *version, const nd_rtloop_stats *l
     io->skipped_said = loop->skipped;
     io->skip_said_at = now;
   }
-  io->st.state = r->holding ? "holding" : "emulating";
+  char name[48];
+  if (r->stops > io->stops_said) {
+    const nds_panda_reflex *x = &r->reflex;
+    fprintf(stderr, PROG ": the robot stopped: %s %.4g beyond its limit %.4g; braking until the "
+            "next task (%lld stops)\n", nds_panda_reflex_name(x, name, sizeof(name)), x->value,
+            x->limit, (long long)r->stops);
+    io->stops_said = r->stops;
+  }
+  if (r->stopped)
+    snprintf(io->state, sizeof(io->state), "stopped: %s",
+             nds_panda_reflex_name(&r->reflex, name, sizeof(name)));
+  else
+    snprintf(io->state, sizeof(io->state), "%s", r->holding ? "holding" : "emulating");
+  io->st.state = io->state;
 }

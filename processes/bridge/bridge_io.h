@@ -24,8 +24,10 @@ typedef struct {
   bridge_report rep;        /* the newest report */
   int holding;              /* as last said; -1 before */
   int had_cmd;              /* an EE_CMD was tracked before */
-  int64_t resets_said, skipped_said;
+  int64_t resets_said, skipped_said, stops_said;
   double reset_said_at, skip_said_at;
+  int64_t task_id;          /* the newest TASK seen; -1 none */
+  char state[64];           /* the heartbeat's state word ("stopped: joint 4 velocity") */
 } bridge_io;
 
 /* The command line. */
@@ -43,7 +45,8 @@ typedef struct {
  * printed). */
 int bridge_options(int argc, char **argv, bridge_opts *o);
 
-/* Subscribe EE_CMD. Return 0, or -1 with a message. */
+/* Subscribe EE_CMD and TASK (a new task resumes a stopped arm). Return 0, or -1 with a
+ * message. */
 int bridge_io_subscribe(bridge_io *io, lcm_t *lcm, char *err, int errlen);
 
 /* Publish what the loop encoded. Return the number of failed publishes. */

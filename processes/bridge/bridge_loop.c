@@ -1,9 +1,11 @@
 /* bridge_loop: one step of the bridge (bridge_loop.h). */
 #include "bridge_loop.h"
 
+#include <math.h>
 #include <string.h>
 
 #include "nd_snap.h"
+#include "nudge/nudge_arm_state_t.h"
 #include "nudge/nudge_mocap_t.h"
 #include "nudge/nudge_robot_state_t.h"
 
@@ -14,11 +16,13 @@ void bridge_loop_init(bridge_loop *b, nds_world *w, double cmd_timeout) {
   nd_mailbox_init(&b->cmd);
   nd_mailbox_init(&b->report);
   nd_ring_init(&b->out);
+  atomic_init(&b->resume_req, 0);
   b->holding = 1;  /* no command yet: hold the start position */
   nds_world_ee(w, b->hold);
   /* lcm-gen computes a type's hash lazily on first use: do it here, not in the loop. */
   (void)nudge_robot_state_t_encoded_size(&(nudge_robot_state_t){0});
   (void)nudge_mocap_t_encoded_size(&(nudge_mocap_t){0});
+  (void)nudge_arm_state_t_encoded_size(&(nudge_arm_state_t){0});
   bridge_loop_report_post(b);
 }
 
@@ -30,9 +34,9 @@ void bridge_loop_report_post(bridge_loop *b) {
   nd_mailbox_post(&b->report, &b->rep, sizeof(b->rep));
 }
 
-/* The setpoint: the newest command while fresh, else hold where the sphere was when
- * commands went stale. Return 1 if the hold state changed. */
-static int setpoint(bridge_loop *b, double now, double sp[2][4]) {
+/* The setpoint at utime: the newest command while fresh, else hold where the sphere was
+ * when commands went stale. Return 1 if the hold state changed. */
+static int setpoint(bridge_loop *b, double now, int64_t utime, double sp[2][4]) {
   bridge_cmd c;
   if (nd_mailbox_take(&b->cmd, &b->cmd_version, &c, sizeof(c)) == (int)sizeof(c)) {
     b->last = c;
@@ -42,30 +46,64 @@ static int setpoint(bridge_loop *b, double now, double sp[2][4]) {
   int changed = 0;
   if (fresh && b->holding) {
     b->holding = 0;
+    nds_world_motion_start(b->world);
     changed = 1;
   } else if (!fresh && !b->holding) {
+    /* The robot's own stop, not a commanded motion: its reflexes start afresh from it. */
     b->holding = 1;
+    nds_world_motion_start(b->world);
     nds_world_ee(b->world, b->hold);
     b->rep.hold_events++;
     changed = 1;
   }
+  const double h = fmin(fmax((double)(utime - b->last.utime) * 1e-6, -BRIDGE_CMD_HORIZON),
+                        BRIDGE_CMD_HORIZON);
   for (int k = 0; k < 2; k++) {
-    sp[k][ND_P] = b->holding ? b->hold[k] : b->last.p[k];
-    sp[k][ND_V] = b->holding ? 0.0 : b->last.v[k];
-    sp[k][ND_A] = b->holding ? 0.0 : b->last.a[k];
-    sp[k][ND_J] = 0.0;
+    const double p = b->last.p[k], v = b->last.v[k], a = b->last.a[k], j = b->last.j[k];
+    sp[k][ND_P] = b->holding ? b->hold[k] : p + h * (v + h * (a / 2 + h * j / 6));
+    sp[k][ND_V] = b->holding ? 0.0 : v + h * (a + h * j / 2);
+    sp[k][ND_A] = b->holding ? 0.0 : a + h * j;
+    sp[k][ND_J] = b->holding ? 0.0 : j;
   }
   return changed;
 }
 
+/* Encode the arm's joints (ARM_STATE) into the ring. */
+static void put_arm(bridge_loop *b, const nds_world_robot *r, int64_t utime) {
+  unsigned char *slot = nd_ring_reserve(&b->out);
+  if (slot) {
+    nudge_arm_state_t a;
+    a.utime = utime;
+    a.seq = b->arm_seq;
+    memcpy(a.q, r->q, sizeof(a.q));
+    memcpy(a.dq, r->dq, sizeof(a.dq));
+    memcpy(a.tau, r->tau, sizeof(a.tau));
+    const int n = nudge_arm_state_t_encode(slot, 0, ND_RTIO_MAX, &a);
+    if (n > 0) nd_ring_commit(&b->out, BRIDGE_TAG_ARM_STATE, n);
+    b->rep.arm_states++;
+  }
+  b->arm_seq++;
+}
+
 void bridge_loop_step(bridge_loop *b, double now, int64_t utime) {
   double sp[2][4];
-  int post = setpoint(b, now, sp);
+  int post = setpoint(b, now, utime, sp);
+  const uint64_t req = atomic_load_explicit(&b->resume_req, memory_order_relaxed);
+  if (req != b->resume_seen) {  /* a new task: a stopped arm tracks again */
+    b->resume_seen = req;
+    nds_world_resume(b->world);
+  }
   nds_world_out out;
   nds_world_step(b->world, sp, &out);
   if (out.reset) {
     b->rep.resets++;
     if (b->holding) nds_world_ee(b->world, b->hold);
+  }
+  if (out.robot.stopped != b->rep.stopped) {
+    b->rep.stopped = out.robot.stopped;
+    b->rep.stops += out.stopped_now;
+    if (out.stopped_now) b->rep.reflex = out.robot.reflex;
+    post = 1;
   }
 
   unsigned char *slot = nd_ring_reserve(&b->out);
@@ -77,6 +115,12 @@ void bridge_loop_step(bridge_loop *b, double now, int64_t utime) {
     memcpy(rs.ee_pos, out.robot.ee_pos, sizeof(rs.ee_pos));
     memcpy(rs.ee_vel, out.robot.ee_vel, sizeof(rs.ee_vel));
     memcpy(rs.ee_force, out.robot.ee_force, sizeof(rs.ee_force));
+    rs.mode = out.robot.stopped ? NUDGE_ROBOT_STATE_T_MODE_STOPPED
+              : b->holding      ? NUDGE_ROBOT_STATE_T_MODE_HOLDING
+                                : NUDGE_ROBOT_STATE_T_MODE_TRACKING;
+    /* nds_panda numbers its reflexes as robot_state_t does; joints 0..6 are 1..7 there. */
+    rs.reflex = out.robot.stopped ? (int8_t)out.robot.reflex.kind : 0;
+    rs.reflex_joint = out.robot.stopped ? (int8_t)(out.robot.reflex.joint + 1) : 0;
     const int n = nudge_robot_state_t_encode(slot, 0, ND_RTIO_MAX, &rs);
     if (n > 0) nd_ring_commit(&b->out, BRIDGE_TAG_ROBOT_STATE, n);
     b->rep.robot_states++;
@@ -92,7 +136,7 @@ void bridge_loop_step(bridge_loop *b, double now, int64_t utime) {
       memset(&mc, 0, sizeof(mc));
       /* utime is the capture time: a frame's latency shows as its age. */
       mc.utime = utime - (int64_t)((t - f->capture_t) * 1e6 + 0.5);
-      mc.seq = b->mc_seq;
+      mc.seq = f->index;  /* a dropped frame shows as a gap, as a camera's numbering does */
       memcpy(mc.obj_pos, f->obj_pos, sizeof(mc.obj_pos));
       memcpy(mc.obj_quat, f->obj_quat, sizeof(mc.obj_quat));
       memcpy(mc.ee_pos, f->ee_pos, sizeof(mc.ee_pos));
@@ -102,6 +146,7 @@ void bridge_loop_step(bridge_loop *b, double now, int64_t utime) {
     }
     b->mc_seq++;
   }
+  if (out.robot.arm && b->rep.steps % BRIDGE_LOOP_ARM_STEPS == 0) put_arm(b, &out.robot, utime);
   b->rep.steps++;
   if (post || b->rep.steps % BRIDGE_LOOP_REPORT_STEPS == 0) bridge_loop_report_post(b);
 }

@@ -1,6 +1,6 @@
 /* bridge_loop: one step of nudge-bridge's 1 kHz loop, without the clock.
  *
- * Take the newest EE_CMD from its mailbox; track it while fresh, else hold where the
+ * Take the newest EE_CMD from its mailbox; track it, at the step's time, while fresh, else hold where the
  * sphere was when commands went stale (or never came); step the world (sim/nds_world.h);
  * encode ROBOT_STATE and the motion-capture frames the step released into the ring. A step
  * never allocates, locks, prints or waits on I/O (tests/unit/test_rtloop.c counts it);
@@ -19,36 +19,51 @@
 
 /* A validated EE_CMD as the loop needs it, stamped with its local arrival. */
 typedef struct {
-  double p[2], v[2], a[2];
+  double p[2], v[2], a[2], j[2];
+  int64_t utime;       /* the time the setpoint is for, us */
   double arrival;      /* monotonic s */
   int64_t seq;
 } bridge_cmd;
 
-/* What the loop reports, every BRIDGE_LOOP_REPORT_STEPS steps and at every hold change.
- * Counters only grow. */
+/* A command is applied at the step's own time: p + v h + a h^2/2 + j h^3/6 for h the
+ * step's utime less the command's, as a robot's interface samples a setpoint stream at its
+ * own clock (doc/lab-world.md#commands). Taking the newest command as it is would step the
+ * setpoint by v times the network's jitter (0.1 mm at 0.5 m/s and 0.2 ms: 100 m/s^2 to the
+ * robot's acceleration reflex); without j, an executor late by a few ms leaves j h^3/6 (5
+ * um at 500 m/s^3 and 4 ms: 5 m/s^2). h is clamped to +-BRIDGE_CMD_HORIZON: a longer
+ * silence is the executor's failure, and clocks that disagree cannot throw it far. */
+#define BRIDGE_CMD_HORIZON 0.02
+
+/* What the loop reports, every BRIDGE_LOOP_REPORT_STEPS steps and at every hold or stop
+ * change. Counters only grow. */
 typedef struct {
-  int64_t steps, resets, hold_events;
-  int64_t robot_states, frames;
+  int64_t steps, resets, hold_events, stops;
+  int64_t robot_states, frames, arm_states;
   double hold_pos[2];  /* the setpoint while holding */
-  int32_t holding, have_cmd;
+  int32_t holding, have_cmd, stopped;
+  nds_panda_reflex reflex;  /* the newest stop's */
 } bridge_report;
 
 #define BRIDGE_LOOP_REPORT_STEPS 100
 
-enum { BRIDGE_TAG_ROBOT_STATE = 0, BRIDGE_TAG_MOCAP = 1 };
+#define BRIDGE_LOOP_ARM_STEPS 20  /* ARM_STATE every 20 steps: 50 Hz, for drawing */
+
+enum { BRIDGE_TAG_ROBOT_STATE = 0, BRIDGE_TAG_MOCAP = 1, BRIDGE_TAG_ARM_STATE = 2 };
 
 typedef struct {
   nds_world *world;
   double cmd_timeout;  /* s: a command older than this is stale */
   nd_mailbox cmd;      /* I/O -> loop */
   nd_mailbox report;   /* loop -> I/O */
-  nd_ring out;         /* loop -> I/O: encoded ROBOT_STATE / MOCAP */
+  nd_ring out;         /* loop -> I/O: encoded ROBOT_STATE / MOCAP / ARM_STATE */
+  atomic_uint_fast64_t resume_req;  /* I/O -> loop: +1 per new task (a stopped arm resumes) */
   /* the loop thread's own */
   bridge_cmd last;
   uint64_t cmd_version;
   int have_cmd, holding;
   double hold[2];
-  int64_t rs_seq, mc_seq;
+  uint64_t resume_seen;
+  int64_t rs_seq, mc_seq, arm_seq;
   bridge_report rep;
 } bridge_loop;
 

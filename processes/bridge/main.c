@@ -56,14 +56,23 @@ int main(int argc, char **argv) {
       nd_rtloop_start(&loop, &rc, bridge_loop_tick, b, how, sizeof how, err,
                       sizeof err))
     goto done;
+  const nd_mocap_cfg *mc = &wc.mocap;
+  const nds_scene_cfg *ob = &wc.object;
   fprintf(stderr,
-          PROG ": emulation, world dt %.3g ms at %g Hz real time (%s), MOCAP %g Hz, EE_CMD "
-               "timeout %g s, theta (%g, %g, %g, %g), object (%g, %g, %g), ee (%g, %g), "
-               "workspace x [%g, %g] y [%g, %g] m (+%g m), model %s, LCM %s\n",
-          1e3 / rc.rate, rc.rate, how, wc.mocap.rate, cmd_timeout, wc.theta[0], wc.theta[1],
-          wc.theta[2], wc.theta[3], wc.obj[0], wc.obj[1], wc.obj[2], wc.ee[0], wc.ee[1],
-          ws.lo[0], ws.hi[0], ws.lo[1], ws.hi[1], BRIDGE_WS_MARGIN,
-          wc.model_path ? wc.model_path : "built-in scene", ndp_url(url));
+          PROG ": emulation, %s world (%s), dt %.3g ms at %g Hz real time (%s); MOCAP %g Hz, "
+               "noise %g m %g rad, latency %g +- %g s, %g%% lost in bursts of %g; object %g x "
+               "%g x %g m, %g kg, centre of mass (%g, %g, %g), solref %g %g; theta (%g, %g, "
+               "%g, %g); start object (%g, %g, %g), ee (%g, %g); EE_CMD timeout %g s, "
+               "workspace x [%g, %g] y [%g, %g] m (+%g m); model %s; LCM %s\n",
+          wc.kind == NDS_WORLD_LAB ? "lab" : "ideal",
+          wc.arm ? "a Panda holds the sphere" : "the sphere on slide joints", 1e3 / rc.rate,
+          rc.rate, how, mc->rate, mc->sigma_pos, mc->sigma_rot, mc->latency,
+          mc->latency_jitter, 100 * mc->drop_prob * mc->drop_burst, mc->drop_burst,
+          2 * ob->obj_half[0], 2 * ob->obj_half[1], 2 * ob->obj_half[2], ob->obj_mass,
+          ob->obj_com[0], ob->obj_com[1], ob->obj_com[2], ob->solref[0], ob->solref[1],
+          wc.theta[0], wc.theta[1], wc.theta[2], wc.theta[3], wc.obj[0], wc.obj[1], wc.obj[2],
+          wc.ee[0], wc.ee[1], cmd_timeout, ws.lo[0], ws.hi[0], ws.lo[1], ws.hi[1],
+          BRIDGE_WS_MARGIN, wc.model_path ? wc.model_path : "built-in scene", ndp_url(url));
 
   const double t0 = ndp_mono();
   uint64_t v_rep = 0, v_loop = 0;
@@ -98,11 +107,12 @@ int main(int argc, char **argv) {
   const bridge_report *r = &io.rep;
   fprintf(stderr,
           PROG ": stopped after %.2f s: %lld steps (%.1f /s), %lld ROBOT_STATE, %lld MOCAP, "
-               "EE_CMD %lld received %lld refused (%lld outside the workspace), period error "
-               "p50 %d p99 %d max %d us, overruns %lld, dropped steps %lld, resets %lld, ring "
-               "drops %llu\n",
+               "%lld ARM_STATE, %lld reflex stops, inputs %lld received %lld refused (%lld "
+               "EE_CMD outside the workspace), period error p50 %d p99 %d max %d us, overruns "
+               "%lld, dropped steps %lld, resets %lld, ring drops %llu\n",
           up, (long long)r->steps, r->steps / up, (long long)r->robot_states,
-          (long long)r->frames, (long long)io.st.received, (long long)io.st.rejected,
+          (long long)r->frames, (long long)r->arm_states, (long long)r->stops,
+          (long long)io.st.received, (long long)io.st.rejected,
           (long long)io.refused_ws.count, ls.p50_us, ls.p99_us, ls.max_us,
           (long long)ls.overruns, (long long)ls.skipped, (long long)r->resets,
           (unsigned long long)atomic_load(&b->out.dropped));

@@ -53,7 +53,7 @@ int ndp_check_robot_state(const nudge_robot_state_t *m, char *why, int len) {
     return -1;
   }
   if (m->reflex < NUDGE_ROBOT_STATE_T_REFLEX_NONE ||
-      m->reflex > NUDGE_ROBOT_STATE_T_REFLEX_CART_JERK ||
+      m->reflex > NUDGE_ROBOT_STATE_T_REFLEX_NONFINITE ||
       (m->reflex != NUDGE_ROBOT_STATE_T_REFLEX_NONE) != (m->mode == NUDGE_ROBOT_STATE_T_MODE_STOPPED) ||
       m->reflex_joint < 0 || m->reflex_joint > 7) {
     snprintf(why, len, "reflex %d on joint %d with mode %d is not a known reflex", m->reflex,
@@ -65,7 +65,8 @@ int ndp_check_robot_state(const nudge_robot_state_t *m, char *why, int len) {
 
 int ndp_check_ee_cmd(const nudge_ee_cmd_t *m, char *why, int len) {
   if (utime_ok(m->utime, why, len) || vec_ok(m->p, 3, NDP_MAX_POS, "p", why, len) ||
-      vec_ok(m->v, 3, NDP_MAX_VEL, "v", why, len) || vec_ok(m->a, 3, NDP_MAX_ACC, "a", why, len))
+      vec_ok(m->v, 3, NDP_MAX_VEL, "v", why, len) || vec_ok(m->a, 3, NDP_MAX_ACC, "a", why, len) ||
+      vec_ok(m->j, 3, NDP_MAX_JERK, "j", why, len))
     return -1;
   if (m->mode < NUDGE_EE_CMD_T_MODE_TRACKING || m->mode > NUDGE_EE_CMD_T_MODE_HOLDING) {
     snprintf(why, len, "mode = %d is not a known mode", m->mode);

@@ -26,6 +26,7 @@ _Static_assert(ND_MAX_KEYS == NUDGE_PLAN_T_MAX_KEYPOINTS,
 #define NDP_MAX_POS 10.0     /* m */
 #define NDP_MAX_VEL 20.0     /* m/s */
 #define NDP_MAX_ACC 1000.0   /* m/s^2 */
+#define NDP_MAX_JERK 1e6     /* m/s^3 */
 #define NDP_MAX_FORCE 1e5    /* N */
 
 int ndp_check_mocap(const nudge_mocap_t *m, char *why, int len);

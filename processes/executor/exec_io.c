@@ -23,6 +23,7 @@ static void use_state(void *user, const nudge_robot_state_t *msg) {
   exec_loop_state_in in;
   in.t_arrive = ndp_sent_mono(msg->utime);
   memcpy(in.ee_pos, msg->ee_pos, sizeof in.ee_pos);
+  in.stopped = msg->mode == NUDGE_ROBOT_STATE_T_MODE_STOPPED;
   nd_mailbox_post(&c->x->state, &in, (int)sizeof(in));
 }
 

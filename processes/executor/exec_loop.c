@@ -1,6 +1,7 @@
 /* exec_loop: one cycle of the executor's loop (contract in exec_loop.h). */
 #include "exec_loop.h"
 
+#include <math.h>
 #include <string.h>
 
 #include "nudge/nudge_ee_cmd_t.h"
@@ -47,6 +48,15 @@ int exec_loop_cycle(exec_loop *s, double now, int64_t utime) {
       dirty = 1;
     }
     s->t_state = st.t_arrive;
+    /* A stopped robot brakes where it is and waits for the next task: the setpoint stays
+     * on it (so it resumes without a jump) and no plan is followed until a fresh one. */
+    if (st.stopped && (!s->stopped || hypot(st.ee_pos[0] - s->stop_pos[0],
+                                            st.ee_pos[1] - s->stop_pos[1]) > EXEC_LOOP_STOP_STEP)) {
+      nd_exec_init(&s->ex, st.ee_pos, now);
+      memcpy(s->stop_pos, st.ee_pos, sizeof(s->stop_pos));
+    }
+    if (st.stopped) s->have_plan = 0, s->pending = 0;
+    s->stopped = st.stopped;
   }
   if (nd_mailbox_take(&s->io->plan, &s->v_plan, &pl, (int)sizeof(pl)) == (int)sizeof(pl)) {
     s->plan = pl;
@@ -60,7 +70,7 @@ int exec_loop_cycle(exec_loop *s, double now, int64_t utime) {
   const int state_stale = now - s->t_state > timeout;
   /* A plan waits while the state is stale (it would be dropped again at once) and is
    * applied when the state returns, if it is still fresh itself. */
-  if (s->pending && !state_stale) {
+  if (s->pending && !state_stale && !s->stopped) {
     s->pending = 0;
     if (now - s->plan.t_arrive <= timeout) {
       /* Restarting the segment for a re-sent keypoint would postpone it by a re-planning
@@ -127,6 +137,7 @@ int exec_loop_cycle(exec_loop *s, double now, int64_t utime) {
     m.p[ax] = sp[ax][ND_P];
     m.v[ax] = sp[ax][ND_V];
     m.a[ax] = sp[ax][ND_A];
+    m.j[ax] = sp[ax][ND_J];
   }
   m.p[2] = s->z;
   m.v[2] = m.a[2] = 0.0;

@@ -41,6 +41,11 @@ int main(int argc, char **argv) {
        .help = "box in metres the keypoints are drawn in; nudge-executor refuses plans with a "
                "keypoint outside its own --workspace, nudge-bridge commands beyond its own: "
                "give all three the same box (nudge-up --workspace does)"},
+      {"v-max", ND_OPT_DOUBLE, &pc.v_max, 1e-3, 10.0, .arg = "M/S",
+       .help = "end-effector speed a plan may reach; keep it below nudge-executor's --v-max, "
+               "which refuses plans beyond its own (nudge-up --world lab sets both)"},
+      {"a-max", ND_OPT_DOUBLE, &pc.a_max, 1e-3, 1000.0, .arg = "M/S2",
+       .help = "end-effector acceleration a plan may reach; below nudge-executor's --a-max"},
   };
   nd_opt_spec spec = {PROG, "[options]",
                       "MPC planner: plans minimum-snap keypoints with iCEM on MuJoCo rollouts "
@@ -70,6 +75,7 @@ int main(int argc, char **argv) {
   pc.pop = o.pop;
   pc.iters = o.iters;
   pc.seed = o.seed;
+  pc.key_v_max = fmin(pc.key_v_max, pc.v_max);
   for (int k = 0; k < 2; k++) pc.ws_lo[k] = o.ws.lo[k], pc.ws_hi[k] = o.ws.hi[k];
   if (nds_model_init(&pm, &sc, err, sizeof(err)) ||
       !(pool = nd_pool_create(o.threads, err, sizeof(err))) ||
@@ -85,10 +91,11 @@ int main(int argc, char **argv) {
   fprintf(stderr,
           PROG ": %s, iCEM N %d C %d, M %d, T %.2f s, plan dt %.4f s, %d worker(s), max %.1f "
           "plans/s, state timeout %.3f s, theta (%g, %g, %g, %g), seed %llu, keypoints in "
-          "x [%g, %g] y [%g, %g] m\n",
+          "x [%g, %g] y [%g, %g] m, v_max %g m/s, a_max %g m/s^2\n",
           ndp_url(o.url), o.pop, o.iters, pc.M, pc.T, o.plan_dt, o.threads, o.max_rate,
           o.state_timeout, o.theta[0], o.theta[1], o.theta[2], o.theta[3],
-          (unsigned long long)o.seed, pc.ws_lo[0], pc.ws_hi[0], pc.ws_lo[1], pc.ws_hi[1]);
+          (unsigned long long)o.seed, pc.ws_lo[0], pc.ws_hi[0], pc.ws_lo[1], pc.ws_hi[1],
+          pc.v_max, pc.a_max);
 
   const double period = 1.0 / o.max_rate;
   double next_plan = 0.0, last = ndp_mono();

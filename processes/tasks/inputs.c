@@ -15,6 +15,16 @@ static void refuse(void *user, const char *ch, const char *why) {
   ndp_refused(&io->refused, PROG, ch, why);
 }
 
+/* Add the way from *last to p to *path once it is TASKS_PATH_STEP long, and move *last
+ * there: summed frame by frame, motion capture's noise would count as travel (0.14 mm a
+ * frame at 0.1 mm per axis: 0.17 m over 5 s at rest). */
+static void path_step(double *path, double last[2], const double *p, int have_last) {
+  const double d = have_last ? hypot(p[0] - last[0], p[1] - last[1]) : INFINITY;
+  if (have_last && d < TASKS_PATH_STEP) return;
+  if (have_last) *path += d;
+  last[0] = p[0], last[1] = p[1];
+}
+
 static void use_mocap(void *user, const nudge_mocap_t *m) {
   tasks_io *io = user;
   io->last = *m;
@@ -24,12 +34,8 @@ static void use_mocap(void *user, const nudge_mocap_t *m) {
   io->st.received++;
   tasks_running *r = &io->run;
   if (r->id >= 0) {
-    if (r->have_last) {
-      r->obj_path += hypot(m->obj_pos[0] - r->last_obj[0], m->obj_pos[1] - r->last_obj[1]);
-      r->ee_path += hypot(m->ee_pos[0] - r->last_ee[0], m->ee_pos[1] - r->last_ee[1]);
-    }
-    memcpy(r->last_obj, m->obj_pos, sizeof(r->last_obj));
-    memcpy(r->last_ee, m->ee_pos, sizeof(r->last_ee));
+    path_step(&r->obj_path, r->last_obj, m->obj_pos, r->have_last);
+    path_step(&r->ee_path, r->last_ee, m->ee_pos, r->have_last);
     r->have_last = 1;
   }
   if (io->buf) {
@@ -43,7 +49,11 @@ static void use_mocap(void *user, const nudge_mocap_t *m) {
 static void use_robot_state(void *user, const nudge_robot_state_t *m) {
   tasks_io *io = user;
   io->st.received++;
-  if (m->mode == NUDGE_ROBOT_STATE_T_MODE_STOPPED && io->run.id >= 0 && !io->run.stopped) {
+  /* A robot still stopped from the last task resumes when this task's TASK reaches the
+   * bridge: only a stop after it has moved again is this task's. */
+  if (m->mode != NUDGE_ROBOT_STATE_T_MODE_STOPPED && io->run.id >= 0) io->run.resumed = 1;
+  if (m->mode == NUDGE_ROBOT_STATE_T_MODE_STOPPED && io->run.id >= 0 && io->run.resumed &&
+      !io->run.stopped) {
     io->run.stopped = 1;
     io->run.reflex = m->reflex;
     io->run.reflex_joint = m->reflex_joint;

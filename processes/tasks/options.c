@@ -17,6 +17,18 @@ static const nd_goal chain[] = {
     {.x = 0.00, .y = 0.20, .yaw = 0.3},
 };
 
+/* The lab arm serves x [-0.15, 0.15], y [-0.30, 0.40] (sim/nds_panda.h): pushes of the
+ * same 14-16 cm, laid out so the sphere's place behind the object (8 cm back along the push)
+ * stays in that box at the start and end of each: a diagonal push with a turn, a push ahead
+ * with more turn, a pull back that needs the sphere to go around, back across, and a
+ * diagonal push with a turn the other way. */
+static const nd_goal chain_lab[] = {
+    {.x = 0.08, .y = 0.12, .yaw = 0.4}, {.x = 0.04, .y = 0.26, .yaw = 0.8},
+    {.x = -0.08, .y = 0.16, .yaw = 0.3}, {.x = 0.02, .y = 0.04, .yaw = 0.0},
+    {.x = 0.14, .y = -0.04, .yaw = -0.3},
+};
+static const char *const world_words[] = {"ideal", "lab", NULL};
+
 static int add_goal(const char *v, const char *what, void *dst, char *err, int errlen) {
   tasks_cfg *c = dst;
   char why[400];
@@ -51,13 +63,16 @@ int tasks_options(int argc, char **argv, tasks_cfg *c) {
   *c = (tasks_cfg){.eps = 1e-2, .tau = 5.0, .workspace = 0.5, .wait = 10.0, .settle = 0.5,
                     .record_dt = 0.001};
   memcpy(c->theta, nd_theta_true, sizeof(c->theta));
+  int world = 0;
   nd_opt opts[] = {
       {"goal", ND_OPT_CUSTOM, c, .parse = add_goal, .arg = "X,Y,YAW[,EPS[,TIME_LIMIT]]",
        .def = "", .help = "a goal pose (m, m, rad); repeatable, run in order"},
       {"goals", ND_OPT_CUSTOM, c, .parse = add_goals, .arg = "FILE", .def = "",
        .help = "goals from FILE, one per line: x y yaw [eps [time_limit]] ('#' comments, blank "
                "lines ignored); repeatable. Without goals: a chain of 5 pushes of 14-16 cm from "
-               "the origin"},
+               "the origin (laid out for the arm's reach with --world lab)"},
+      {"world", ND_OPT_CHOICE, &world, .choices = world_words, .arg = "NAME",
+       .help = "the bridge's world, for the default goals: lab's chain fits the arm's reach"},
       {"eps", ND_OPT_DOUBLE, &c->eps, 1e-12, 1.0, .arg = "E",
        .help = "success threshold on L_pos + 0.02 L_rot (per-goal values override)"},
       {"tau", ND_OPT_DOUBLE, &c->tau, 1e-3, ND_GOAL_MAX_TAU, .arg = "S",
@@ -100,7 +115,10 @@ int tasks_options(int argc, char **argv, tasks_cfg *c) {
   if (pa != ND_OPT_RUN) return pa;
   if (c->await_fit > 0 && !c->record)
     return nd_opt_fail(&spec, "--await-fit needs --record (it waits for the fit of a record)");
-  if (c->n == 0) {
+  if (c->n == 0 && world == 1) {
+    c->n = (int)(sizeof(chain_lab) / sizeof(chain_lab[0]));
+    memcpy(c->goals, chain_lab, sizeof(chain_lab));
+  } else if (c->n == 0) {
     c->n = (int)(sizeof(chain) / sizeof(chain[0]));
     memcpy(c->goals, chain, sizeof(chain));
   }

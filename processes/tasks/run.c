@@ -64,7 +64,8 @@ int tasks_wait_mocap(lcm_t *lcm, tasks_io *io, double wait, char *err, int errle
 const char *tasks_reflex_name(int reflex, int joint) {
   static char buf[64];
   static const char *what[] = {"none", "position", "velocity", "acceleration", "torque",
-                               "Cartesian velocity", "Cartesian acceleration", "Cartesian jerk"};
+                               "Cartesian velocity", "Cartesian acceleration", "Cartesian jerk",
+                               "non-finite reading"};
   const char *w = reflex >= 0 && reflex < (int)(sizeof(what) / sizeof(what[0])) ? what[reflex] : "?";
   if (reflex >= NUDGE_ROBOT_STATE_T_REFLEX_CART_VELOCITY || joint < 1) snprintf(buf, sizeof buf, "%s", w);
   else snprintf(buf, sizeof buf, "joint %d %s", joint, w);

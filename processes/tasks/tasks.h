@@ -65,6 +65,8 @@ typedef struct {
   const char *path;      /* the buffer, also while it cannot be opened */
 } tasks_buffer;
 
+#define TASKS_PATH_STEP 0.002 /* m: paths are summed in steps of at least this */
+
 #define MAX_PLAN_AGES 100000 /* plan ages kept for the percentiles: hours of plans */
 
 /* What happened during the running task, as the handlers see it. */
@@ -74,7 +76,8 @@ typedef struct {
   double obj_path, ee_path;  /* m travelled by object and sphere (MOCAP) */
   double last_obj[2], last_ee[2];
   int have_last;
-  int stopped;        /* a reflex stopped the robot */
+  int resumed;        /* ROBOT_STATE has said the robot is not stopped since the task began */
+  int stopped;        /* a reflex stopped the robot after that */
   int reflex, reflex_joint;  /* robot_state_t.REFLEX_*, joint 1..7 or 0 */
 } tasks_running;
 

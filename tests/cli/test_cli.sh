@@ -290,6 +290,7 @@ bad nudge-up "--theta|'1,2,3,4 5'" --theta '1,2,3,4 5'
 bad nudge-up "--workspace|'1,2,3'|XLO,YLO,XHI,YHI" --workspace 1,2,3
 bad nudge-up "--workspace|'1,2,3,4;touch x'" --workspace '1,2,3,4;touch x'
 bad nudge-up "--workspace needs a value" --workspace
+bad nudge-up "--world: expected ideal or lab, got 'moon'" --world moon
 
 # Stand-ins for the programs: each records its argv (NUL-separated), its pid and its umask,
 # then runs until SIGINT/SIGTERM; nudge-tasks exits at once; nudge-status --wait says
@@ -366,11 +367,11 @@ fi
 [[ $PT_RC == 0 ]] || cat "$W/up.err"
 # --workspace reaches the three processes that keep to the box, ahead of the user's own
 # --X-arg (a later --workspace there wins).
-args_are nudge-bridge --workspace "$WS" "${EVIL[0]}" "${EVIL[1]}"
+args_are nudge-bridge --workspace "$WS" --world ideal "${EVIL[0]}" "${EVIL[1]}"
 args_are nudge-executor --workspace "$WS" "${EVIL[3]}" "${EVIL[4]}" "${EVIL[5]}"
 args_are nudge-planner --workspace "$WS" --theta "$THETA" --pop "${EVIL[2]}"
 args_are nudge-adapter --theta "$THETA" --buffer "$BUF" "${EVIL[6]}" "${EVIL[7]}"
-args_are nudge-tasks --record "$BUF" --theta "$THETA" --goal "${EVIL[8]}" "${EVIL[9]}" "${EVIL[4]}"
+args_are nudge-tasks --record "$BUF" --world ideal --theta "$THETA" --goal "${EVIL[8]}" "${EVIL[9]}" "${EVIL[4]}"
 pwned=$(find "$W" -name 'pwned[0-9]')
 pt_check "no argument was run as a command (no pwned* file)" test -z "$pwned"
 pt_check "the log directory has its literal name" test -f "$LOGDIR/supervisor.log"
@@ -384,6 +385,23 @@ for p in bridge executor planner adapter tasks; do
   u=$(<"$W/nudge-$p.umask")
   pt_check "nudge-$p runs with umask $u (o+w masked)" test $((8#$u & 2)) -eq 2
 done
+
+# --world lab gives the arm's box and limits, ahead of the user's own; a --workspace given
+# to nudge-up wins over the arm's box.
+rm -f "$W"/*.args
+"$FAKE/nudge-up" demo --world lab --lcm-url memq:// --log-dir "$W/logs-lab" --buffer "$W/lab.nrb" \
+  --grace 2 --ready-timeout 5 --planner-arg --pop --planner-arg 16 >"$W/up-lab.out" 2>"$W/up-lab.err"
+rc=$?
+pt_check "nudge-up demo --world lab with stand-ins exits 0 (got $rc)" test "$rc" -eq 0
+LAB=-0.15,-0.30,0.15,0.40
+args_are nudge-bridge --workspace "$LAB" --world lab
+args_are nudge-executor --workspace "$LAB" --v-max 0.5 --a-max 2.0
+args_are nudge-planner --workspace "$LAB" --v-max 0.45 --a-max 1.8 --pop 16
+args_are nudge-tasks --record "$W/lab.nrb" --world lab
+rm -f "$W"/*.args
+"$FAKE/nudge-up" demo --world lab --workspace "$WS" --lcm-url memq:// --log-dir "$W/logs-lab2" \
+  --buffer "$W/lab.nrb" --grace 2 --ready-timeout 5 >"$W/up-lab2.out" 2>"$W/up-lab2.err"
+args_are nudge-executor --workspace "$WS" --v-max 0.5 --a-max 2.0
 
 # A process refusing its arguments: nudge-up stops what it started and exits 2, showing
 # the refusal.

@@ -43,7 +43,7 @@ static void fz_valid_robot_state(const nudge_robot_state_t *m) {
            m->mode <= NUDGE_ROBOT_STATE_T_MODE_STOPPED &&
            (m->reflex != NUDGE_ROBOT_STATE_T_REFLEX_NONE) ==
                (m->mode == NUDGE_ROBOT_STATE_T_MODE_STOPPED) &&
-           m->reflex <= NUDGE_ROBOT_STATE_T_REFLEX_CART_JERK && m->reflex_joint >= 0 &&
+           m->reflex <= NUDGE_ROBOT_STATE_T_REFLEX_NONFINITE && m->reflex_joint >= 0 &&
            m->reflex_joint <= 7,
            "accepted robot_state out of bounds");
 }
@@ -51,7 +51,7 @@ static void fz_valid_robot_state(const nudge_robot_state_t *m) {
 static void fz_valid_ee_cmd(const nudge_ee_cmd_t *m) {
   FZ_CHECK(m->utime > 0 && fz_bounded(m->p, 3, NDP_MAX_POS) &&
            fz_bounded(m->v, 3, NDP_MAX_VEL) && fz_bounded(m->a, 3, NDP_MAX_ACC) &&
-           m->mode >= NUDGE_EE_CMD_T_MODE_TRACKING && m->mode <= NUDGE_EE_CMD_T_MODE_HOLDING && m->plan_utime >= 0,
+           fz_bounded(m->j, 3, NDP_MAX_JERK) && m->mode >= NUDGE_EE_CMD_T_MODE_TRACKING && m->mode <= NUDGE_EE_CMD_T_MODE_HOLDING && m->plan_utime >= 0,
            "accepted ee_cmd out of bounds");
 }
 

@@ -13,7 +13,9 @@
  * A third kind, sent only when asked for (--kind workspace), is valid in every field but
  * lies outside the default workspace box: a PLAN with its keypoints at (0.8, 0) and an
  * EE_CMD at (0.8, 0). The executor and the bridge must refuse these; a stack that did not
- * would move the robot toward them, which is what the test looks for. */
+ * would move the robot toward them, which is what the test looks for.
+ * A fourth, --plan-to X,Y, is valid and inside any box that holds (X, Y): PLANs that send
+ * the robot there and hold, for driving an arm into a limit of its own. */
 #include <lcm/lcm.h>
 #include <math.h>
 #include <stdint.h>
@@ -46,6 +48,8 @@ typedef struct {
   int on[CH_COUNT];
   int bad, garbage;    /* kinds to send */
   int workspace;       /* the valid-but-outside kind (PLAN, EE_CMD only) */
+  int plan_to;         /* valid PLANs to `to` (PLAN only) */
+  double to[2];
   int repeat;
   double gap_s;        /* pause after each message */
   uint64_t seed;
@@ -232,6 +236,8 @@ static void inject_ee_cmd(inj *j) {
   CMD_BAD(m.v[1] = -1e4);
   CMD_BAD(m.a[0] = NAN);
   CMD_BAD(m.a[1] = 1e9);
+  CMD_BAD(m.j[0] = NAN);
+  CMD_BAD(m.j[1] = -1e7);
   CMD_BAD(m.mode = 7);
   CMD_BAD(m.mode = -1);
   CMD_BAD(m.plan_utime = -1);
@@ -279,6 +285,14 @@ static void inject_plan(inj *j) {
   PLAN_BAD(m.utime = 0);
   PLAN_BAD(m.state_utime = -1);
 #undef PLAN_BAD
+  if (j->o->plan_to) {
+    m = ok;
+    m.plan_id = 3000000 + j->n_ws[CH_PLAN];
+    m.utime = m.state_utime = wall_us();
+    m.T = 0.5;
+    for (int k = 0; k < 2; k++) m.keypoints[0][k] = m.keypoints[1][k] = j->o->to[k];
+    send_ws(j, nudge_plan_t_encode(j->buf, 0, MAX_MSG, &m));
+  }
   if (j->o->workspace) {
     m = ok;
     m.plan_id = 2000000 + j->n_ws[CH_PLAN];
@@ -418,6 +432,8 @@ static void usage(FILE *f) {
           "                  repeat for more (default: all but STATUS)\n"
           "  --kind K        bad, garbage or all (default all); or workspace: valid PLAN\n"
           "                  and EE_CMD outside the default workspace (at (0.8, 0))\n"
+          "  --plan-to X,Y   instead: valid PLANs to (X, Y), on PLAN only (with --repeat\n"
+          "                  and --gap-ms: a stream the executor follows)\n"
           "  --repeat N      send everything N times, 1..10000 (default 1)\n"
           "  --gap-ms MS     pause after each message, 0..1000 ms (default 1)\n"
           "  --seed N        seed of the random garbage (default 1)\n"
@@ -449,7 +465,8 @@ static int parse_args(int argc, char **argv, inj_opts *o) {
       return 0;
     }
     if (strcmp(a, "--channel") && strcmp(a, "--kind") && strcmp(a, "--repeat") &&
-        strcmp(a, "--gap-ms") && strcmp(a, "--seed") && strcmp(a, "--lcm-url")) {
+        strcmp(a, "--gap-ms") && strcmp(a, "--seed") && strcmp(a, "--lcm-url") &&
+        strcmp(a, "--plan-to")) {
       snprintf(err, sizeof err, "unknown argument '%s'", a);
       return bad_arg(err);
     }
@@ -472,6 +489,10 @@ static int parse_args(int argc, char **argv, inj_opts *o) {
       else if (!strcmp(v, "garbage")) o->bad = 0;
       else if (!strcmp(v, "workspace")) o->bad = o->garbage = 0, o->workspace = 1;
       else if (strcmp(v, "all")) return bad_arg("--kind: expected bad, garbage, all or workspace");
+    } else if (!strcmp(a, "--plan-to")) {
+      if (nd_parse_list(v, a, 2, -1.0, 1.0, o->to, err, sizeof err)) return bad_arg(err);
+      o->bad = o->garbage = 0, o->plan_to = 1;
+      o->on[CH_PLAN] = 1, any = 1;
     } else if (!strcmp(a, "--repeat")) {
       if (nd_parse_int(v, a, 1, 10000, &o->repeat, err, sizeof err)) return bad_arg(err);
     } else if (!strcmp(a, "--gap-ms")) {

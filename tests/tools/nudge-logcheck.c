@@ -29,6 +29,7 @@
 typedef struct {
   const char *cmd, *log;
   const char *arg;         /* status: process name; last: channel */
+  const char *state;       /* status: only heartbeats whose state starts with this */
   const char *committed;   /* buffer: file of committed task ids */
   const char *buffer;      /* history: the replay buffer it was fitted on */
   int allow_torn;          /* buffer, history: a torn tail is no failure */
@@ -476,6 +477,163 @@ static int cmd_ee_pos(const lc_opts *o) {
   return 0;
 }
 
+/* ---- sensing: motion capture and robot state of a robot at rest ---------------------- */
+
+#define MAX_SAMPLES 200000
+
+/* Running sums for a mean and standard deviation. */
+typedef struct {
+  double n, s, ss;
+} msum;
+
+static void msum_add(msum *m, double x) { m->n++, m->s += x, m->ss += x * x; }
+static double msum_mean(const msum *m) { return m->n > 0 ? m->s / m->n : 0.0; }
+static double msum_std(const msum *m) {
+  if (m->n < 2) return 0.0;
+  const double mu = m->s / m->n;
+  return sqrt(fmax(0.0, (m->ss - m->n * mu * mu) / (m->n - 1)));
+}
+
+typedef struct {
+  const lc_opts *o;
+  msum pos[3], ee[3], rot[3];
+  double q0[4];            /* the first frame's orientation: rotations are taken from it */
+  int64_t count, first_seq, last_seq, gaps, missing, undecodable;
+  double *age;             /* ms, one per frame */
+  double t_first, t_last;  /* capture times, s */
+} noise_acc;
+
+static void noise_visit(const lcm_eventlog_event_t *ev, void *user) {
+  noise_acc *a = user;
+  nudge_mocap_t m;
+  char why[160];
+  if (nudge_mocap_t_decode(ev->data, 0, ev->datalen, &m) < 0 ||
+      ndp_check_mocap(&m, why, sizeof why)) {
+    a->undecodable++;
+    return;
+  }
+  if ((a->o->from && m.utime < a->o->from) || (a->o->to && m.utime > a->o->to)) return;
+  if (!a->count) {
+    memcpy(a->q0, m.obj_quat, sizeof a->q0);
+    a->first_seq = m.seq;
+    a->t_first = (double)m.utime * 1e-6;
+  } else if (m.seq > a->last_seq + 1) {
+    a->gaps++;
+    a->missing += m.seq - a->last_seq - 1;
+  }
+  a->last_seq = m.seq;
+  a->t_last = (double)m.utime * 1e-6;
+  /* The small rotation from the first frame: 2 vec(conj(q0) q), per axis. */
+  const double *p = a->q0, *q = m.obj_quat;
+  const double sgn = p[0] * q[0] + p[1] * q[1] + p[2] * q[2] + p[3] * q[3] < 0 ? -1.0 : 1.0;
+  const double r[3] = {p[0] * q[1] - p[1] * q[0] - p[2] * q[3] + p[3] * q[2],
+                       p[0] * q[2] + p[1] * q[3] - p[2] * q[0] - p[3] * q[1],
+                       p[0] * q[3] - p[1] * q[2] + p[2] * q[1] - p[3] * q[0]};
+  for (int k = 0; k < 3; k++) {
+    msum_add(&a->pos[k], m.obj_pos[k]);
+    msum_add(&a->ee[k], m.ee_pos[k]);
+    msum_add(&a->rot[k], 2.0 * sgn * r[k]);
+  }
+  if (a->count < MAX_SAMPLES) a->age[a->count] = (double)(ev->timestamp - m.utime) * 1e-3;
+  a->count++;
+}
+
+static int cmp_double(const void *x, const void *y) {
+  const double a = *(const double *)x, b = *(const double *)y;
+  return (a > b) - (a < b);
+}
+
+static double pct(const double *sorted, int64_t n, double p) {
+  return n ? sorted[(int64_t)floor(p * (double)(n - 1) + 0.5)] : 0.0;
+}
+
+static int cmd_mocap_noise(const lc_opts *o) {
+  static noise_acc a;
+  memset(&a, 0, sizeof a);
+  a.o = o;
+  static double age[MAX_SAMPLES];
+  a.age = age;
+  if (for_each(o->log, NDP_CH_MOCAP, noise_visit, &a)) return 1;
+  if (a.count < 100) {
+    fail("%lld MOCAP frames: too few for noise figures", (long long)a.count);
+    return 0;
+  }
+  const int64_t n = a.count < MAX_SAMPLES ? a.count : MAX_SAMPLES;
+  qsort(age, (size_t)n, sizeof age[0], cmp_double);
+  const double span = a.t_last - a.t_first;
+  printf("mocap_frames %lld count\n", (long long)a.count);
+  printf("mocap_rate %.1f Hz\n", span > 0 ? (double)(a.last_seq - a.first_seq) / span : 0.0);
+  printf("mocap_obj_pos_std %.4f %.4f %.4f mm\n", 1e3 * msum_std(&a.pos[0]),
+         1e3 * msum_std(&a.pos[1]), 1e3 * msum_std(&a.pos[2]));
+  printf("mocap_ee_pos_std %.4f %.4f %.4f mm\n", 1e3 * msum_std(&a.ee[0]),
+         1e3 * msum_std(&a.ee[1]), 1e3 * msum_std(&a.ee[2]));
+  printf("mocap_obj_rot_std %.5f %.5f %.5f rad\n", msum_std(&a.rot[0]), msum_std(&a.rot[1]),
+         msum_std(&a.rot[2]));
+  printf("mocap_obj_pos_mean %.5f %.5f %.5f m\n", msum_mean(&a.pos[0]), msum_mean(&a.pos[1]),
+         msum_mean(&a.pos[2]));
+  printf("mocap_age_p50 %.3f ms\nmocap_age_p99 %.3f ms\n", pct(age, n, 0.5), pct(age, n, 0.99));
+  const double due = (double)(a.last_seq - a.first_seq + 1);
+  printf("mocap_lost_share %.4f of_frames\n", due > 0 ? (double)a.missing / due : 0.0);
+  printf("mocap_lost_burst_mean %.2f frames\n", a.gaps ? (double)a.missing / (double)a.gaps : 0.0);
+  return 0;
+}
+
+typedef struct {
+  const lc_opts *o;
+  msum pos[3], vel[3], force[3];
+  int64_t count, stops, resumes, after_tracking;
+  int mode, first_reflex, first_joint;
+} rs_acc;
+
+static void rs_visit(const lcm_eventlog_event_t *ev, void *user) {
+  rs_acc *a = user;
+  nudge_robot_state_t m;
+  char why[160];
+  if (nudge_robot_state_t_decode(ev->data, 0, ev->datalen, &m) < 0 ||
+      ndp_check_robot_state(&m, why, sizeof why))
+    return;
+  if ((a->o->from && m.utime < a->o->from) || (a->o->to && m.utime > a->o->to)) return;
+  const int stopped = m.mode == NUDGE_ROBOT_STATE_T_MODE_STOPPED;
+  if (a->count && stopped && a->mode != NUDGE_ROBOT_STATE_T_MODE_STOPPED) {
+    if (!a->stops++) a->first_reflex = m.reflex, a->first_joint = m.reflex_joint;
+  }
+  if (a->count && !stopped && a->mode == NUDGE_ROBOT_STATE_T_MODE_STOPPED) a->resumes++;
+  if (a->o->after && m.utime > a->o->after && m.mode == NUDGE_ROBOT_STATE_T_MODE_TRACKING)
+    a->after_tracking++;
+  a->mode = m.mode;
+  for (int k = 0; k < 3; k++) {
+    msum_add(&a->pos[k], m.ee_pos[k]);
+    msum_add(&a->vel[k], m.ee_vel[k]);
+    msum_add(&a->force[k], m.ee_force[k]);
+  }
+  a->count++;
+}
+
+static int cmd_robot_state(const lc_opts *o) {
+  rs_acc a;
+  memset(&a, 0, sizeof a);
+  a.o = o;
+  if (for_each(o->log, NDP_CH_ROBOT_STATE, rs_visit, &a)) return 1;
+  if (!a.count) {
+    fail("no ROBOT_STATE in the window");
+    return 0;
+  }
+  printf("robot_states %lld count\n", (long long)a.count);
+  printf("robot_pos_std %.5f %.5f %.5f mm\n", 1e3 * msum_std(&a.pos[0]),
+         1e3 * msum_std(&a.pos[1]), 1e3 * msum_std(&a.pos[2]));
+  printf("robot_vel_std %.5f %.5f %.5f mm/s\n", 1e3 * msum_std(&a.vel[0]),
+         1e3 * msum_std(&a.vel[1]), 1e3 * msum_std(&a.vel[2]));
+  printf("robot_force_std %.4f %.4f %.4f N\n", msum_std(&a.force[0]), msum_std(&a.force[1]),
+         msum_std(&a.force[2]));
+  printf("robot_stops %lld count\nrobot_resumes %lld count\n", (long long)a.stops,
+         (long long)a.resumes);
+  printf("robot_first_reflex %d code\nrobot_first_reflex_joint %d joint\n", a.first_reflex,
+         a.first_joint);
+  printf("robot_last_mode %d code\n", a.mode);
+  if (o->after) printf("robot_tracking_after %lld count\n", (long long)a.after_tracking);
+  return 0;
+}
+
 /* ---- status: a process's heartbeat counters ----------------------------------------- */
 
 typedef struct {
@@ -493,6 +651,7 @@ static void status_visit(const lcm_eventlog_event_t *ev, void *user) {
   char why[160];
   if (ndp_decode_status(ev->data, ev->datalen, &m, why, sizeof why)) return;
   const int match = !strcmp(m.name, o->arg) && (!o->pid || m.pid == o->pid) &&
+                    (!o->state || !strncmp(m.state, o->state, strlen(o->state))) &&
                     (!o->before || m.utime < o->before) && (!o->after || m.utime > o->after);
   /* --after: the first heartbeat after; otherwise the last one (before). */
   if (match && !(o->after && s->found)) {
@@ -992,7 +1151,18 @@ static void usage(FILE *f) {
           "  last LOG CHANNEL newest utime and count of CHANNEL's valid messages\n"
           "      --before-utime U (at or before U), --after-utime U (after U)\n"
           "  status LOG NAME  heartbeat counters of process NAME: the last one, or\n"
-          "      --before-utime U (last before U), --after-utime U (first after U), --pid P\n"
+          "      --before-utime U (last before U), --after-utime U (first after U), --pid P,\n"
+          "      --state S (only heartbeats whose state begins with S)\n"
+          "  mocap-noise LOG  MOCAP of a scene at rest: frames, rate, standard deviations of\n"
+          "                   the object's position (mm) and rotation (rad) per axis and of\n"
+          "                   the sphere's position, age at the logger (p50, p99), frames\n"
+          "                   lost (seq gaps) and their mean burst\n"
+          "      --from-utime U, --to-utime U     window\n"
+          "  robot-state LOG  ROBOT_STATE: standard deviations of position, velocity and\n"
+          "                   force per axis; reflex stops and resumes (mode changes), the\n"
+          "                   first stop's reflex and joint, the last mode\n"
+          "      --from-utime U, --to-utime U     window\n"
+          "      --after-utime U    also count TRACKING states after U\n"
           "  ee-pos LOG       the robot's positions (ROBOT_STATE): count, first, last, x and\n"
           "                   y range, farthest from the first\n"
           "      --from-utime U, --to-utime U     window\n"
@@ -1055,6 +1225,7 @@ static int parse_args(int argc, char **argv, lc_opts *o) {
   if (strcmp(o->cmd, "episodes") && strcmp(o->cmd, "ee-cmd") && strcmp(o->cmd, "stop-after") &&
       strcmp(o->cmd, "live") && strcmp(o->cmd, "stale-cmds") && strcmp(o->cmd, "first-beats") &&
       strcmp(o->cmd, "buffer") && strcmp(o->cmd, "history") && strcmp(o->cmd, "ee-pos") &&
+      strcmp(o->cmd, "mocap-noise") && strcmp(o->cmd, "robot-state") &&
       !needs_arg) {
     snprintf(err, sizeof err, "unknown command '%s'", o->cmd);
     return bad_arg(err);
@@ -1091,6 +1262,7 @@ static int parse_args(int argc, char **argv, lc_opts *o) {
     else if (!strcmp(a, "--slack-ms")) rc = nd_parse_double(v, a, 0.0, 1e4, &o->slack_ms, err, sizeof err);
     else if (!strcmp(a, "--committed")) o->committed = v;
     else if (!strcmp(a, "--buffer")) o->buffer = v;
+    else if (!strcmp(a, "--state")) o->state = v;
     else if (!strcmp(a, "--slack-us")) rc = nd_parse_double(v, a, 0.0, 1e6, &o->slack_us, err, sizeof err);
     else if (!strcmp(a, "--v-max")) rc = nd_parse_double(v, a, 1e-6, 1e3, &o->lim.v_max, err, sizeof err);
     else if (!strcmp(a, "--a-max")) rc = nd_parse_double(v, a, 1e-6, 1e6, &o->lim.a_max, err, sizeof err);
@@ -1128,6 +1300,8 @@ int main(int argc, char **argv) {
   else if (!strcmp(o.cmd, "stop-after")) rc = cmd_stop_after(&o);
   else if (!strcmp(o.cmd, "last")) rc = cmd_last(&o);
   else if (!strcmp(o.cmd, "ee-pos")) rc = cmd_ee_pos(&o);
+  else if (!strcmp(o.cmd, "mocap-noise")) rc = cmd_mocap_noise(&o);
+  else if (!strcmp(o.cmd, "robot-state")) rc = cmd_robot_state(&o);
   else if (!strcmp(o.cmd, "status")) rc = cmd_status(&o);
   else if (!strcmp(o.cmd, "stale-cmds")) rc = cmd_stale_cmds(&o);
   else if (!strcmp(o.cmd, "first-beats")) rc = cmd_first_beats(&o);

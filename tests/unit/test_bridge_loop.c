@@ -3,7 +3,8 @@
  * (counted by rt_count.h's wrappers), and does what the bridge promises: hold until the
  * first command, track fresh commands, hold where the sphere was when they go stale, one
  * ROBOT_STATE per step with consecutive seq, MOCAP at 240 Hz stamped with its capture time,
- * and every deadline of a catch-up wake-up stepped. */
+ * and every deadline of a catch-up wake-up stepped; with the lab world's arm, commands
+ * that arrive jittered are applied at the step's time and stop no reflex, a jump does. */
 #define _GNU_SOURCE
 #include "nd_test.h"
 #include "rt_count.h"
@@ -20,7 +21,7 @@ static bridge_loop g_b;
 static nd_rtloop g_l;
 
 typedef struct {
-  long states, frames, seq_gaps, late_frames;
+  long states, frames, arm_states, seq_gaps, late_frames;
   int64_t last_seq, last_frame_us, last_state_us;
   double ee[2];
   int mode;
@@ -40,20 +41,75 @@ static void drain(drained *d) {
       d->ee[0] = m.ee_pos[0], d->ee[1] = m.ee_pos[1];
       d->mode = m.mode;
       d->states++;
-    } else {
+    } else if (tag == BRIDGE_TAG_MOCAP) {
       nudge_mocap_t m;
       assert_int_equal(nudge_mocap_t_decode(buf, 0, n, &m), n);
       /* The ideal world's capture has no latency: a frame is stamped with its step's time. */
       d->late_frames += m.utime != d->last_state_us;
       d->last_frame_us = m.utime;
       d->frames++;
+    } else {
+      assert_int_equal(tag, BRIDGE_TAG_ARM_STATE);
+      d->arm_states++;
     }
   }
 }
 
 static void post_cmd(double now, double x, double y) {
-  bridge_cmd c = {{x, y}, {0, 0}, {0, 0}, now, 0};
+  bridge_cmd c = {.p = {x, y}, .utime = U0 + (int64_t)llround((now - T0) * 1e6), .arrival = now};
   nd_mailbox_post(&g_b.cmd, &c, sizeof c);
+}
+
+/* The lab world's arm fed a smooth path (x moves 10 cm and back in 2 s, at most 0.16 m/s and
+ * 0.5 m/s^2) whose commands arrive with a network's jitter: the command for step k comes
+ * at step k or k + 1 (seeded), so some steps see two new commands and some none. Applied at
+ * the step's time, the setpoint stays smooth: no reflex stops the arm and it tracks. Then one
+ * command 0.5 mm off the path (500 m/s^2 in one step): the arm stops on the Cartesian
+ * acceleration reflex, ROBOT_STATE says so, and a new task resumes it. */
+static void test_lab_jittered_commands(void **state) {
+  (void)state;
+  char err[256];
+  nds_world_cfg wc;
+  nds_world_cfg_lab(&wc);
+  nds_world *w = nds_world_create(&wc, err, sizeof err);
+  if (!w) fail_msg("%s", err);
+  bridge_loop_init(&g_b, w, 0.1);
+  enum { STEPS = 3000, JUMP = 2500 };
+  uint64_t rng = 12345;
+  bridge_cmd late = {0};
+  int have_late = 0;
+  double err_max = 0;
+  drained d = {0};
+  for (int k = 0; k < STEPS; k++) {
+    const double t = 1e-3 * k, now = T0 + t, om = M_PI;
+    bridge_cmd c = {.utime = U0 + (int64_t)k * 1000, .arrival = now};
+    c.p[0] = -0.10 + 0.05 * (1 - cos(om * t)), c.v[0] = 0.05 * om * sin(om * t);
+    c.a[0] = 0.05 * om * om * cos(om * t), c.j[0] = -0.05 * om * om * om * sin(om * t);
+    if (k == JUMP) c.p[0] += 5e-4;
+    if (have_late) nd_mailbox_post(&g_b.cmd, &late, sizeof late), have_late = 0;
+    rng = rng * 6364136223846793005ULL + 1442695040888963407ULL;
+    if ((rng >> 33) & 1) nd_mailbox_post(&g_b.cmd, &c, sizeof c);
+    else late = c, have_late = 1;
+    bridge_loop_step(&g_b, now, c.utime);
+    drain(&d);
+    if (k > 200 && k < JUMP) err_max = fmax(err_max, fabs(d.ee[0] - c.p[0]));
+    if (k == JUMP - 1) {
+      printf("lab_jitter_stops %lld count\nlab_jitter_track_err_max %.4f m\n",
+             (long long)g_b.rep.stops, err_max);
+      assert_int_equal(g_b.rep.stops, 0);
+      assert_int_equal(d.mode, NUDGE_ROBOT_STATE_T_MODE_TRACKING);
+      assert_true(err_max < 5e-3);
+    }
+  }
+  printf("lab_jump_stops %lld count, reflex %d\n", (long long)g_b.rep.stops, g_b.rep.reflex.kind);
+  assert_int_equal(g_b.rep.stops, 1);
+  assert_int_equal(g_b.rep.reflex.kind, NDS_PANDA_REFLEX_CART_ACCELERATION);
+  assert_int_equal(d.mode, NUDGE_ROBOT_STATE_T_MODE_STOPPED);
+  atomic_fetch_add(&g_b.resume_req, 1);
+  bridge_loop_step(&g_b, T0 + 1e-3 * STEPS, U0 + (int64_t)STEPS * 1000);
+  drain(&d);
+  assert_int_not_equal(d.mode, NUDGE_ROBOT_STATE_T_MODE_STOPPED);
+  nds_world_free(w);
 }
 
 static void test_step_allocates_nothing(void **state) {
@@ -131,6 +187,7 @@ static void test_step_allocates_nothing(void **state) {
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_step_allocates_nothing),
+      cmocka_unit_test(test_lab_jittered_commands),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

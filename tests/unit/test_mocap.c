@@ -60,6 +60,7 @@ static void test_lab_statistics(void **state) {
     if (i) {
       assert_true(f[i].t_capture > f[i - 1].t_capture && f[i].t_release >= f[i - 1].t_release);
       const int missing = (int)lround((f[i].t_capture - f[i - 1].t_capture) * c.rate) - 1;
+      assert_int_equal(f[i].index - f[i - 1].index - 1, missing);  /* drops leave gaps */
       gaps += missing > 0;
       if (missing > longest) longest = missing;
     }

@@ -213,7 +213,7 @@ static void run_scenario(exec_loop *s, exec_loop_io *io, const nd_exec_cfg *cfg,
     const int state_on = e >= 0 && !(e >= PH_STATE_STALE && e < PH_STATE_BACK);
     const int plan_on = e >= 0 && !(e >= PH_PLAN_STALE && e < PH_PLAN_BACK);
     if (state_on) {
-      exec_loop_state_in in = {now - 2e-4, {last_p[0], last_p[1], 0.025}};
+      exec_loop_state_in in = {.t_arrive = now - 2e-4, .ee_pos = {last_p[0], last_p[1], 0.025}, .stopped = 0};
       if (!have_prev) in.ee_pos[0] = 0.05, in.ee_pos[1] = -0.02;
       nd_mailbox_post(&io->state, &in, (int)sizeof in);
       t_state = in.t_arrive;
@@ -356,7 +356,7 @@ static void test_cycle_allocates_nothing(void **state) {
 
 /* The robot state as the loop's input: the sphere at p, received 0.2 ms before now. */
 static void post_state(double now, const double p[2]) {
-  exec_loop_state_in in = {now - 2e-4, {p[0], p[1], 0.025}};
+  exec_loop_state_in in = {.t_arrive = now - 2e-4, .ee_pos = {p[0], p[1], 0.025}, .stopped = 0};
   nd_mailbox_post(&g_io.state, &in, (int)sizeof in);
 }
 
