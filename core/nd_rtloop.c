@@ -50,10 +50,18 @@ static int64_t mono_ns(void) {
   return ts_ns(&t);
 }
 
-static int64_t wall_us(void) {
-  struct timespec t;
-  clock_gettime(CLOCK_REALTIME, &t);
-  return (int64_t)t.tv_sec * 1000000 + t.tv_nsec / 1000;
+/* Wall clock less monotonic clock, ns: of a few paired reads the tightest, so a preemption
+ * between two reads does not enter it. */
+static int64_t wall_offset_ns(void) {
+  int64_t best_gap = INT64_MAX, off = 0;
+  for (int i = 0; i < 5; i++) {
+    struct timespec w;
+    const int64_t m0 = mono_ns();
+    clock_gettime(CLOCK_REALTIME, &w);
+    const int64_t m1 = mono_ns();
+    if (m1 - m0 < best_gap) best_gap = m1 - m0, off = ts_ns(&w) - (m0 + (m1 - m0) / 2);
+  }
+  return off;
 }
 
 static void post(nd_rtloop *l) {
@@ -80,8 +88,9 @@ void nd_rtloop_wake(nd_rtloop *l, int64_t *next_ns, int64_t now_ns, int64_t utim
     tk.deadline = 1e-9 * (double)dl;
     tk.utime = utime_now - (now_ns - dl) / 1000;
     tk.catching_up = k + 1 < run;
-    tk.now = 1e-9 * (double)(k ? mono_ns() : now_ns);
-    tk.utime_now = k ? wall_us() : utime_now;
+    const int64_t t_ns = k ? mono_ns() : now_ns;
+    tk.now = 1e-9 * (double)t_ns;
+    tk.utime_now = k ? utime_now + (t_ns - now_ns) / 1000 : utime_now;
     l->fn(l->ctx, &tk);
     l->st.cycles++;
   }
@@ -93,14 +102,16 @@ void nd_rtloop_wake(nd_rtloop *l, int64_t *next_ns, int64_t now_ns, int64_t utim
 static void *loop_main(void *arg) {
   nd_rtloop *l = arg;
   const int64_t period = (int64_t)llround(1e9 / l->cfg.rate);
-  int64_t next = mono_ns() + period;
+  int64_t next = mono_ns() + period, resync = 0;
   while (!atomic_load_explicit(&l->stop, memory_order_relaxed)) {
+    /* The clocks' offset, again once a second: the wall clock may be slewed or stepped. */
+    if (next >= resync) l->wall_off_ns = wall_offset_ns(), resync = next + 1000000000;
     const struct timespec dl = {(time_t)(next / 1000000000), (long)(next % 1000000000)};
     while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &dl, NULL) == EINTR) {
     }
     /* Stamp the cycle with the instant it starts, not when computing ends. */
-    const int64_t now = mono_ns(), utime = wall_us();
-    nd_rtloop_wake(l, &next, now, utime);
+    const int64_t now = mono_ns();
+    nd_rtloop_wake(l, &next, now, (now + l->wall_off_ns) / 1000);
   }
   post(l);
   return NULL;

@@ -89,7 +89,10 @@ void bridge_io_report(bridge_io *io, uint64_t *version, const nd_rtloop_stats *l
   bridge_report *r = &io->rep;
   if (nd_mailbox_take(&io->b->report, version, r, sizeof(*r)) != (int)sizeof(*r)) return;
   if (r->holding != io->holding) {
-    if (r->holding)
+    if (r->holding && r->late)
+      fprintf(stderr, PROG ": EE_CMD late by over %g ms: the robot holds its setpoint at "
+              "(%.4f, %.4f)\n", 1e3 * BRIDGE_CMD_HORIZON, r->hold_pos[0], r->hold_pos[1]);
+    else if (r->holding)
       fprintf(stderr, PROG ": %s: the robot holds at (%.4f, %.4f)\n",
               r->have_cmd ? "EE_CMD went stale" : "no EE_CMD yet", r->hold_pos[0],
               r->hold_pos[1]);

@@ -34,36 +34,46 @@ void bridge_loop_report_post(bridge_loop *b) {
   nd_mailbox_post(&b->report, &b->rep, sizeof(b->rep));
 }
 
-/* The setpoint at utime: the newest command while fresh, else hold where the sphere was
- * when commands went stale. Return 1 if the hold state changed. */
+/* The setpoint at utime: the newest command while fresh; else hold the last setpoint once
+ * the newest command is late (a stalled commander or machine: doc/lab-world.md#commands),
+ * or where the sphere is if none came for the timeout. Return 1 if the hold state
+ * changed. */
 static int setpoint(bridge_loop *b, double now, int64_t utime, double sp[2][4]) {
   bridge_cmd c;
   if (nd_mailbox_take(&b->cmd, &b->cmd_version, &c, sizeof(c)) == (int)sizeof(c)) {
     b->last = c;
     b->have_cmd = 1;
   }
-  const int fresh = b->have_cmd && now - b->last.arrival <= b->cmd_timeout;
+  const double age = (double)(utime - b->last.utime) * 1e-6;
+  const int timely = b->have_cmd && now - b->last.arrival <= b->cmd_timeout;
+  const int fresh = timely && age <= BRIDGE_CMD_HORIZON;
   int changed = 0;
   if (fresh && b->holding) {
     b->holding = 0;
+    b->rep.late = 0;
     nds_world_motion_start(b->world);
     changed = 1;
   } else if (!fresh && !b->holding) {
     /* The robot's own stop, not a commanded motion: its reflexes start afresh from it. */
     b->holding = 1;
     nds_world_motion_start(b->world);
-    nds_world_ee(b->world, b->hold);
+    b->rep.late = timely;
+    if (timely) b->hold[0] = b->sp_last[0], b->hold[1] = b->sp_last[1], b->rep.late_events++;
+    else nds_world_ee(b->world, b->hold), b->rep.hold_events++;
+    changed = 1;
+  } else if (b->holding && b->rep.late && !timely) {
+    b->rep.late = 0;  /* late became stale: the commander is gone, the hold stays put */
     b->rep.hold_events++;
     changed = 1;
   }
-  const double h = fmin(fmax((double)(utime - b->last.utime) * 1e-6, -BRIDGE_CMD_HORIZON),
-                        BRIDGE_CMD_HORIZON);
+  const double h = fmax(age, -BRIDGE_CMD_HORIZON);
   for (int k = 0; k < 2; k++) {
     const double p = b->last.p[k], v = b->last.v[k], a = b->last.a[k], j = b->last.j[k];
     sp[k][ND_P] = b->holding ? b->hold[k] : p + h * (v + h * (a / 2 + h * j / 6));
     sp[k][ND_V] = b->holding ? 0.0 : v + h * (a + h * j / 2);
     sp[k][ND_A] = b->holding ? 0.0 : a + h * j;
     sp[k][ND_J] = b->holding ? 0.0 : j;
+    b->sp_last[k] = sp[k][ND_P];
   }
   return changed;
 }

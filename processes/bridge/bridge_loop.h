@@ -1,7 +1,8 @@
 /* bridge_loop: one step of nudge-bridge's 1 kHz loop, without the clock.
  *
- * Take the newest EE_CMD from its mailbox; track it, at the step's time, while fresh, else hold where the
- * sphere was when commands went stale (or never came); step the world (sim/nds_world.h);
+ * Take the newest EE_CMD from its mailbox and track it, sampled at the step's time, while it
+ * is fresh; hold the last setpoint once it is late, or where the sphere is if none came;
+ * step the world (sim/nds_world.h);
  * encode ROBOT_STATE and the motion-capture frames the step released into the ring. A step
  * never allocates, locks, prints or waits on I/O (tests/unit/test_rtloop.c counts it);
  * what it has to say goes into the report mailbox.
@@ -30,17 +31,21 @@ typedef struct {
  * own clock (doc/lab-world.md#commands). Taking the newest command as it is would step the
  * setpoint by v times the network's jitter (0.1 mm at 0.5 m/s and 0.2 ms: 100 m/s^2 to the
  * robot's acceleration reflex); without j, an executor late by a few ms leaves j h^3/6 (5
- * um at 500 m/s^3 and 4 ms: 5 m/s^2). h is clamped to +-BRIDGE_CMD_HORIZON: a longer
- * silence is the executor's failure, and clocks that disagree cannot throw it far. */
+ * um at 500 m/s^3 and 4 ms: 5 m/s^2). A command older than BRIDGE_CMD_HORIZON is not
+ * stretched further: the robot holds its last setpoint, as a robot interface does when its
+ * commander falls silent, and tracks again when a timely command comes; each change starts
+ * a new motion for the reflexes. h is clamped to -BRIDGE_CMD_HORIZON on the other side,
+ * so clocks that disagree cannot throw it far. */
 #define BRIDGE_CMD_HORIZON 0.02
 
 /* What the loop reports, every BRIDGE_LOOP_REPORT_STEPS steps and at every hold or stop
  * change. Counters only grow. */
 typedef struct {
-  int64_t steps, resets, hold_events, stops;
+  int64_t steps, resets, hold_events, late_events, stops;
   int64_t robot_states, frames, arm_states;
   double hold_pos[2];  /* the setpoint while holding */
   int32_t holding, have_cmd, stopped;
+  int32_t late;        /* the hold is for a command late by over BRIDGE_CMD_HORIZON */
   nds_panda_reflex reflex;  /* the newest stop's */
 } bridge_report;
 
@@ -62,6 +67,7 @@ typedef struct {
   uint64_t cmd_version;
   int have_cmd, holding;
   double hold[2];
+  double sp_last[2];   /* the setpoint position of the last step */
   uint64_t resume_seen;
   int64_t rs_seq, mc_seq, arm_seq;
   bridge_report rep;

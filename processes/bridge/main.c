@@ -51,10 +51,11 @@ int main(int argc, char **argv) {
   ndp_status_init(&io.st, PROG);
   nd_rtloop_stats ls = {0};
   io.st.loop = &ls;
-  if (!(lcm = ndp_lcm_create(url, err, sizeof(err))) ||
-      bridge_io_subscribe(&io, lcm, err, sizeof(err)) ||
-      nd_rtloop_start(&loop, &rc, bridge_loop_tick, b, how, sizeof how, err,
-                      sizeof err))
+  /* The loop first: it raises this thread to the I/O priority, and LCM's receive thread,
+   * created with the LCM instance, inherits it (doc/decisions.md#command-sampling). */
+  if (nd_rtloop_start(&loop, &rc, bridge_loop_tick, b, how, sizeof how, err, sizeof err) ||
+      !(lcm = ndp_lcm_create(url, err, sizeof(err))) ||
+      bridge_io_subscribe(&io, lcm, err, sizeof(err)))
     goto done;
   const nd_mocap_cfg *mc = &wc.mocap;
   const nds_scene_cfg *ob = &wc.object;
@@ -107,11 +108,11 @@ int main(int argc, char **argv) {
   const bridge_report *r = &io.rep;
   fprintf(stderr,
           PROG ": stopped after %.2f s: %lld steps (%.1f /s), %lld ROBOT_STATE, %lld MOCAP, "
-               "%lld ARM_STATE, %lld reflex stops, inputs %lld received %lld refused (%lld "
+               "%lld ARM_STATE, %lld reflex stops, %lld holds for a late EE_CMD, inputs %lld received %lld refused (%lld "
                "EE_CMD outside the workspace), period error p50 %d p99 %d max %d us, overruns "
                "%lld, dropped steps %lld, resets %lld, ring drops %llu\n",
           up, (long long)r->steps, r->steps / up, (long long)r->robot_states,
-          (long long)r->frames, (long long)r->arm_states, (long long)r->stops,
+          (long long)r->frames, (long long)r->arm_states, (long long)r->stops, (long long)r->late_events,
           (long long)io.st.received, (long long)io.st.rejected,
           (long long)io.refused_ws.count, ls.p50_us, ls.p99_us, ls.max_us,
           (long long)ls.overruns, (long long)ls.skipped, (long long)r->resets,

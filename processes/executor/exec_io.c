@@ -88,14 +88,15 @@ int exec_io_publish(exec_io *io, lcm_t *lcm) {
   return bad ? -1 : n;
 }
 
-static void say_stale(int bits, double timeout) {
+static void say_stale(int bits, double timeout, double plan_timeout) {
   if (bits & EXEC_STALE_STATE)
     fprintf(stderr, PROG ": stale: no ROBOT_STATE for %g s: braking to rest and holding\n",
             timeout);
   else if (bits & EXEC_STALE_NO_PLAN)
     fprintf(stderr, PROG ": robot state received: holding there until a PLAN arrives\n");
   else
-    fprintf(stderr, PROG ": stale: no PLAN for %g s: braking to rest and holding\n", timeout);
+    fprintf(stderr, PROG ": stale: no PLAN for %g s: braking to rest and holding\n",
+            plan_timeout);
 }
 
 int exec_io_report(exec_io *io, uint64_t *version) {
@@ -105,7 +106,7 @@ int exec_io_report(exec_io *io, uint64_t *version) {
   if (r.n_stale != last->n_stale || r.n_resume != last->n_resume) {
     const int64_t flips = (r.n_stale - last->n_stale) + (r.n_resume - last->n_resume);
     if (r.stale)
-      say_stale(r.stale, io->timeout);
+      say_stale(r.stale, io->timeout, io->plan_timeout);
     else
       fprintf(stderr, PROG ": fresh plan %lld: tracking again\n", (long long)r.plan_id);
     if (flips > 1)

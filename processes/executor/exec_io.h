@@ -10,7 +10,7 @@
 
 typedef struct {
   exec_loop_io *x;     /* the loop's mailboxes and ring */
-  double timeout;      /* s: the loop's input timeout, for log lines */
+  double timeout, plan_timeout;  /* s: the loop's, for log lines */
   ndp_status st;
   int backlog_max;     /* most setpoints found waiting in the ring at once */
   ndp_ratelog log_state, log_plan, log_exec;  /* refused inputs; plans nd_exec refused */
@@ -23,7 +23,8 @@ typedef struct {
 typedef struct {
   nd_exec_cfg cfg;      /* limits and workspace */
   nd_rtloop_cfg rt;     /* rate and real-time set-up */
-  double timeout;       /* s: inputs older than this are stale */
+  double timeout;       /* s: robot state older than this is stale */
+  double plan_timeout;  /* s: a plan older than this is stale */
   const char *url;
 } exec_opts;
 

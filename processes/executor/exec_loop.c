@@ -13,11 +13,12 @@ void exec_loop_io_init(exec_loop_io *io) {
   nd_ring_init(&io->ring);
 }
 
-void exec_loop_init(exec_loop *s, const nd_exec_cfg *cfg, double timeout,
+void exec_loop_init(exec_loop *s, const nd_exec_cfg *cfg, double timeout, double plan_timeout,
                        exec_loop_io *io) {
   memset(s, 0, sizeof(*s));
   s->cfg = *cfg;
   s->timeout = timeout;
+  s->plan_timeout = plan_timeout;
   s->io = io;
   s->rep.mode = -1;
   s->rep.plan_id = -1;
@@ -72,7 +73,7 @@ int exec_loop_cycle(exec_loop *s, double now, int64_t utime) {
    * applied when the state returns, if it is still fresh itself. */
   if (s->pending && !state_stale && !s->stopped) {
     s->pending = 0;
-    if (now - s->plan.t_arrive <= timeout) {
+    if (now - s->plan.t_arrive <= s->plan_timeout) {
       /* Restarting the segment for a re-sent keypoint would postpone it by a re-planning
        * period every time, and a planner that keeps re-sending one plan (its search finds
        * nothing better, the robot at rest) would hold the robot still for good: the first
@@ -114,7 +115,7 @@ int exec_loop_cycle(exec_loop *s, double now, int64_t utime) {
 
   int stale = state_stale ? EXEC_STALE_STATE : 0;
   if (!s->have_plan) stale |= EXEC_STALE_NO_PLAN;
-  else if (now - s->t_plan > timeout) stale |= EXEC_STALE_PLAN;
+  else if (now - s->t_plan > s->plan_timeout) stale |= EXEC_STALE_PLAN;
   if (!stale != !s->rep.stale || s->rep.mode < 0) {
     if (stale) s->rep.n_stale++;
     else s->rep.n_resume++;

@@ -85,7 +85,8 @@ typedef struct {
 /* The loop's state; only the loop thread touches it once the loop runs. */
 typedef struct {
   nd_exec_cfg cfg;              /* limits; passed nd_exec_cfg_check */
-  double timeout;               /* s: inputs older than this are stale */
+  double timeout;               /* s: robot state older than this is stale */
+  double plan_timeout;          /* s: a plan older than this is stale */
   exec_loop_io *io;
   uint64_t v_state, v_plan;     /* mailbox versions taken */
   int have_state;               /* first robot state seen: nd_exec initialised */
@@ -106,11 +107,11 @@ typedef struct {
 /* Empty mailboxes and ring. */
 void exec_loop_io_init(exec_loop_io *io);
 
-/* Set up the loop on io with limits cfg (must pass nd_exec_cfg_check) and input timeout
- * (s). Also does what would otherwise happen lazily on the first cycle (lcm-gen's type
+/* Set up the loop on io with limits cfg (must pass nd_exec_cfg_check), the robot state's
+ * timeout and the plan's (s). Also does what would otherwise happen lazily on the first cycle (lcm-gen's type
  * hash), so the cycles that follow allocate nothing. */
-void exec_loop_init(exec_loop *s, const nd_exec_cfg *cfg, double timeout,
-                       exec_loop_io *io);
+void exec_loop_init(exec_loop *s, const nd_exec_cfg *cfg, double timeout, double plan_timeout,
+                    exec_loop_io *io);
 
 /* One cycle at monotonic time now (s), which is wall-clock time utime (us): take inputs,
  * apply a new plan, step the executor, commit the setpoint for that instant to the ring.

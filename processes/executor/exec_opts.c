@@ -9,6 +9,10 @@ int exec_options(int argc, char **argv, exec_opts *o) {
   nd_box ws = {{o->cfg.ws_lo[0], o->cfg.ws_lo[1]}, {o->cfg.ws_hi[0], o->cfg.ws_hi[1]}};
   nd_rtloop_cfg_default(&o->rt);
   o->timeout = 0.1;
+  /* Plans come at the planner's rate (the paper's robot: 10 Hz), each a segment of 0.3 s
+   * or more: 0.3 s rides over a late plan or two without braking, where the state's 0.1 s
+   * braked the arm between most plans below 10 Hz (doc/decisions.md#plan-timeout). */
+  o->plan_timeout = 0.3;
   int no_rt = 0;
   char ws_help[300];
   snprintf(ws_help, sizeof ws_help,
@@ -19,8 +23,11 @@ int exec_options(int argc, char **argv, exec_opts *o) {
   nd_opt opts[] = {
       {"rate", ND_OPT_DOUBLE, &o->rt.rate, 1.0, 10000.0, .arg = "HZ", .help = "loop rate"},
       {"timeout", ND_OPT_DOUBLE, &o->timeout, 1e-3, 60.0, .arg = "S",
-       .help = "inputs older than this are stale; age counts from the message's utime, so "
-               "hosts need synced clocks"},
+       .help = "ROBOT_STATE older than this is stale; age counts from the message's utime, "
+               "so hosts need synced clocks"},
+      {"plan-timeout", ND_OPT_DOUBLE, &o->plan_timeout, 1e-3, 60.0, .arg = "S",
+       .help = "a PLAN older than this is stale: the robot brakes to rest and holds until a "
+               "fresh one (age from the plan's utime)"},
       {"v-max", ND_OPT_DOUBLE, &o->cfg.v_max, 1e-3, 10.0, .arg = "M/S", .help = "speed limit"},
       {"a-max", ND_OPT_DOUBLE, &o->cfg.a_max, 1e-3, 1000.0, .arg = "M/S2",
        .help = "acceleration limit"},

@@ -49,33 +49,34 @@ int main(int argc, char **argv) {
   const char *url = o.url;
   char err[512];
   ndp_signals();
-  lcm_t *lcm = ndp_lcm_create(url, err, sizeof err);
-  if (!lcm) {
-    fprintf(stderr, PROG ": %s\n", err);
-    return 1;
-  }
   exec_loop_io_init(&x);
-  exec_loop_init(&rt.loop, &cfg, timeout, &x);
+  exec_loop_init(&rt.loop, &cfg, timeout, o.plan_timeout, &x);
   io.x = &x;
   io.timeout = timeout;
+  io.plan_timeout = o.plan_timeout;
   io.last.mode = -1;
   ndp_status_init(&io.st, PROG);
   io.st.state = "waiting";
   nd_rtloop_stats ls = {0};
   io.st.loop = &ls;
   char how[200];
+  lcm_t *lcm = NULL;
+  /* The loop first: it raises this thread to the I/O priority, and LCM's receive thread,
+   * created with the LCM instance, inherits it (doc/decisions.md#command-sampling). */
   if ((rt.bell = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC)) < 0 ||
-      exec_io_subscribe(&io, lcm, err, sizeof err) ||
-      nd_rtloop_start(&loop, &rc, tick, &rt, how, sizeof how, err, sizeof err)) {
+      nd_rtloop_start(&loop, &rc, tick, &rt, how, sizeof how, err, sizeof err) ||
+      !(lcm = ndp_lcm_create(url, err, sizeof err)) ||
+      exec_io_subscribe(&io, lcm, err, sizeof err)) {
     if (rt.bell < 0) snprintf(err, sizeof err, "eventfd: %s", strerror(errno));
     fprintf(stderr, PROG ": %s\n", err);
-    lcm_destroy(lcm);
+    nd_rtloop_stop(&loop);
+    if (lcm) lcm_destroy(lcm);
     return 1;
   }
   fprintf(stderr,
-          PROG ": rate %g Hz, timeout %g s, v_max %g m/s, a_max %g m/s^2, j_max %g m/s^3, "
+          PROG ": rate %g Hz, timeout %g s, plan timeout %g s, v_max %g m/s, a_max %g m/s^2, j_max %g m/s^3, "
                "workspace x [%g, %g] y [%g, %g] m (+%g m for segments), lcm %s, %s\n",
-          rc.rate, timeout, cfg.v_max, cfg.a_max, cfg.j_max, cfg.ws_lo[0], cfg.ws_hi[0],
+          rc.rate, timeout, o.plan_timeout, cfg.v_max, cfg.a_max, cfg.j_max, cfg.ws_lo[0], cfg.ws_hi[0],
           cfg.ws_lo[1], cfg.ws_hi[1], cfg.ws_margin, ndp_url(url), how);
 
   uint64_t v_rep = 0, v_loop = 0, drops_seen = 0;

@@ -13,7 +13,8 @@
 #    starts and valid PLANs send the sphere to (0.45, 0), out of the arm's reach. The arm
 #    stops on a joint limit; the bridge says which in its log and in STATUS, ROBOT_STATE
 #    says STOPPED with the joint, the task runner ends the task as stopped with the
-#    reflex's name. The next task resumes the arm (ROBOT_STATE tracks again) and runs.
+#    reflex's name. The next task resumes the arm (ROBOT_STATE tracks again) and runs
+#    (from the stretched pose the reflex left, it may stop on one of its own: counted too).
 # 3. nudge-up demo --world lab on the lab goal chain: all five tasks run, every stop is
 #    reported (the runner's reflex_stops equals its stopped tasks, the bridge logged at
 #    least as many), the run stops cleanly and leaves nothing behind. How many goals it
@@ -67,6 +68,17 @@ RUN=$PT_WORK/reflex
 pt_spawn up "$PT_BIN/nudge-up" run --world lab --workspace -0.5,-0.5,0.5,0.5 --log-dir "$RUN" \
   2>"$PT_WORK/reflex-up.err"
 if pt_up_wait "$RUN" 30 "$up"; then
+  # Where the 1 kHz loop got SCHED_FIFO, every thread of the process has it: LCM's receive
+  # thread at normal priority was starved by the planner's workers (20 ms without EE_CMD).
+  for p in bridge executor; do
+    pid=$(sed -n -E "s/.*nudge-$p up \(pid ([0-9]+)\).*/\1/p" "$RUN/supervisor.log" | head -n 1)
+    cls=$(ps -L -o cls= -p "$pid" | sort | uniq -c | tr -s ' ' | tr '\n' ';')
+    if ps -L -o cls= -p "$pid" | grep -q FF; then
+      pt_check "nudge-$p: every thread SCHED_FIFO ($cls)" test -z "$(ps -L -o cls= -p "$pid" | grep -v FF)"
+    else
+      pt_say "nudge-$p runs without SCHED_FIFO here ($cls): not checked"
+    fi
+  done
   pt_spawn PT_LOGGER lcm-logger -q -f -c '^(ROBOT_STATE|STATUS|EPISODE|TASK)$' "$LOG2"
   pt_wait_for 5 test -e "$LOG2" || pt_fail "lcm-logger did not start"
   # Two tasks: the first is the one the robot stops in, the second must run.
@@ -94,7 +106,9 @@ if pt_up_wait "$RUN" 30 "$up"; then
     pt_lc status "$LOG2" nudge-bridge --state 'stopped: joint'
   pt_check "task 1 ended as stopped, naming the joint's reflex" \
     grep -qE '^task 1/2 .*stopped after .*the robot stopped on a reflex: joint [1-7]' "$PT_WORK/reflex-tasks.out"
-  pt_check "the runner counted the stop" grep -q '^reflex_stops 1 count' "$PT_WORK/reflex-tasks.out"
+  n_stopped=$(grep -c '^task .* stopped after ' "$PT_WORK/reflex-tasks.out")
+  pt_check "the runner counted every stop ($n_stopped task lines)" \
+    grep -q "^reflex_stops $n_stopped count" "$PT_WORK/reflex-tasks.out"
   pt_check "EPISODE: both tasks started and ended" pt_lc episodes "$LOG2" --min-start 2 --min-end 2
   pt_lc robot-state "$LOG2" >"$PT_WORK/rs2"
   cat "$PT_WORK/rs2"
@@ -104,8 +118,10 @@ if pt_up_wait "$RUN" 30 "$up"; then
   pt_check "ROBOT_STATE named the joint ($v)" within "${v:-0}" 1 7
   v=$(fig robot_resumes "$PT_WORK/rs2")
   pt_check "the next task resumed the arm (ROBOT_STATE left STOPPED $v times)" test "${v:-0}" -ge 1
-  pt_check "the second task ran (a line for task 2/2 that is not a stop at its start)" \
-    grep -qE '^task 2/2 .*(reached|timed out)' "$PT_WORK/reflex-tasks.out"
+  # The arm resumes stretched out where the reflex left it, out of the lab box: the second
+  # task may end on a reflex of its own, but it runs (it does not end at its start).
+  pt_check "the second task ran (its line is not a stop within its first 0.1 s)" \
+    grep -qE '^task 2/2 .*(reached|timed out|stopped after ([1-9]|0\.[1-9]))' "$PT_WORK/reflex-tasks.out"
   pt_none_left "$RUN"
 else
   pt_fail "nudge-up run --world lab did not come up"

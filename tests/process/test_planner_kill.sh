@@ -7,7 +7,7 @@
 # `nudge-up run` + lcm-logger + nudge-tasks on one far goal (tau 15 s; it usually takes
 # 1.5-3 s, once 9.7 s). Once plans flow and the end-effector moves, SIGKILL the planner.
 # From the log, measured from the last PLAN: the executor gives up on it by its plan
-# timeout (--timeout 0.1 s) + 20 ms, and the setpoints are at rest (HOLDING, zero speed)
+# timeout (--plan-timeout 0.1 s) + 20 ms, and the setpoints are at rest (HOLDING, zero speed)
 # within the timeout plus 100 ms. That budget holds the brake from slow pushing (speed at
 # the stop ~0.05-0.4 m/s: 10-60 ms), but the executor stops from wherever the dead plan's
 # segment has taken it (seen: 0.75 m/s, a 119-137 ms brake), and no budget holds from any
@@ -25,7 +25,7 @@ pt_init "$@"
 
 LOG=$PT_WORK/kill.lcmlog
 RUN=$PT_WORK/run
-# The executor's --timeout (passed explicitly): 0.1 s, the default. A slow build
+# The executor's --timeout and --plan-timeout (passed explicitly): 0.1 s. A slow build
 # (NUDGE_SLOW) plans less often than that, and the executor would brake between any two
 # plans; its timeout is scaled so that it tracks until the kill, as in a Release run.
 TIMEOUT_S=$(pt_slow 0.1)
@@ -33,7 +33,8 @@ GOAL=0.30,0.05,0             # ~30 cm from the object's start at the origin
 
 pt_logger "$LOG"
 pt_spawn up "$PT_BIN/nudge-up" run --log-dir "$RUN" --executor-arg --timeout \
-  --executor-arg "$TIMEOUT_S" 2>"$PT_WORK/up.err"
+  --executor-arg "$TIMEOUT_S" --executor-arg --plan-timeout --executor-arg "$TIMEOUT_S" \
+  2>"$PT_WORK/up.err"
 pt_up_wait "$RUN" 30 "$up" || { pt_fail "nudge-up run did not come up within $((30 * PT_SLOW)) s (see supervisor.log below)"; exit 1; }
 pt_ok "nudge-up run: all processes up"
 

@@ -92,7 +92,8 @@ pt_logger_all() {
 }
 pt_logger_all "$LOG"
 pt_spawn up "$PT_BIN/nudge-up" run --log-dir "$RUN" --buffer "$BUF" \
-  --executor-arg --timeout --executor-arg "$TIMEOUT_S" 2>"$PT_WORK/up.err"
+  --executor-arg --timeout --executor-arg "$TIMEOUT_S" \
+  --executor-arg --plan-timeout --executor-arg "$TIMEOUT_S" 2>"$PT_WORK/up.err"
 pt_up_wait "$RUN" 30 "$up" || { pt_fail "nudge-up run did not come up within 30 s (see supervisor.log below)"; exit 1; }
 pt_ok "nudge-up run: all processes up"
 

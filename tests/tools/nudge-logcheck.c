@@ -97,7 +97,7 @@ static double dist3(const double a[3], const double b[3]) {
 #define MAX_TASKS 64
 
 typedef struct {
-  int64_t n[4];                 /* per event kind */
+  int64_t n[5];                 /* per event kind */
   int64_t id[MAX_TASKS];        /* task ids in start order */
   int end_event[MAX_TASKS];     /* -1 while not ended */
   double end_time[MAX_TASKS];
@@ -115,7 +115,8 @@ static void ep_visit(const lcm_eventlog_event_t *ev, void *user) {
     return;
   }
   /* A bad-input test's log holds refused events too: count only what a receiver takes. */
-  if (m.utime > 0 && m.event >= 0 && m.event < 4 && m.task_id >= 0) {
+  if (m.utime > 0 && m.event >= 0 && m.event <= NUDGE_EPISODE_T_EVENT_STOPPED &&
+      m.task_id >= 0) {
     a->n[m.event]++;
     if (m.event == NUDGE_EPISODE_T_EVENT_START) {
       if (a->ntask < MAX_TASKS) {
@@ -136,11 +137,11 @@ static void ep_visit(const lcm_eventlog_event_t *ev, void *user) {
 }
 
 static int cmd_episodes(const lc_opts *o) {
-  static const char *word[4] = {"start", "success", "timeout", "rejected"};
+  static const char *word[5] = {"start", "success", "timeout", "rejected", "stopped"};
   ep_acc a;
   memset(&a, 0, sizeof a);
   if (for_each(o->log, NDP_CH_EPISODE, ep_visit, &a)) return 1;
-  for (int k = 0; k < 4; k++) printf("episodes_%s %lld count\n", word[k], (long long)a.n[k]);
+  for (int k = 0; k < 5; k++) printf("episodes_%s %lld count\n", word[k], (long long)a.n[k]);
   int ended = 0;
   for (int i = 0; i < a.ntask; i++) {
     if (a.end_event[i] < 0) {

@@ -1,7 +1,7 @@
 /* test_bridge_loop: the bridge's 1 kHz step (processes/bridge/bridge_loop.c), run through
  * nd_rtloop's schedule on synthetic time, allocates nothing and makes no blocking call
  * (counted by rt_count.h's wrappers), and does what the bridge promises: hold until the
- * first command, track fresh commands, hold where the sphere was when they go stale, one
+ * first command, track fresh commands, hold the last setpoint when they stop, one
  * ROBOT_STATE per step with consecutive seq, MOCAP at 240 Hz stamped with its capture time,
  * and every deadline of a catch-up wake-up stepped; with the lab world's arm, commands
  * that arrive jittered are applied at the step's time and stop no reflex, a jump does. */
@@ -149,7 +149,7 @@ static void test_step_allocates_nothing(void **state) {
     k = (long)llround(((double)next * 1e-9 - T0) * 1e3);
     if (k >= FULL && k < FULL + 400) continue;  /* the consumer stalls: the ring fills */
     drain(&d);
-    /* Holding: at the sphere's place when commands went stale, once it has settled. */
+    /* Holding: at the last setpoint once the commands stopped, once the sphere settled. */
     if (k > STALE + 1200 && k < BACK) held_still += hypot(d.ee[0] - g_b.hold[0], d.ee[1] - g_b.hold[1]) < 1e-3;
     if (k > TRACK + 500 && k < STALE) tracked += hypot(d.ee[0] - x, d.ee[1] - y) < 0.01;
   }
@@ -179,7 +179,8 @@ static void test_step_allocates_nothing(void **state) {
   /* Tracking while fresh, holding when stale, tracking again. */
   assert_true(tracked > (STALE - TRACK - 500) * 0.95);
   assert_true(held_still > (BACK - STALE - 1200) * 0.95);
-  assert_int_equal(g_b.rep.hold_events, 1);  /* when commands went stale */
+  assert_int_equal(g_b.rep.late_events, 1);  /* 20 ms after the commands stopped */
+  assert_int_equal(g_b.rep.hold_events, 1);  /* and again when they went stale */
   assert_int_equal(g_b.holding, 0);
   nds_world_free(w);
 }

@@ -282,7 +282,7 @@ static void test_cycle_allocates_nothing(void **state) {
   (void)state;
   const nd_exec_cfg cfg = nd_exec_cfg_default();
   exec_loop_io_init(&g_io);
-  exec_loop_init(&g_loop, &cfg, TIMEOUT, &g_io);
+  exec_loop_init(&g_loop, &cfg, TIMEOUT, TIMEOUT, &g_io);
   run_stats st;
   memset(&st, 0, sizeof st);
   run_scenario(&g_loop, &g_io, &cfg, &st);
@@ -380,7 +380,7 @@ static void test_resent_plan_after_restart(void **state) {
   (void)state;
   const nd_exec_cfg cfg = nd_exec_cfg_default();
   exec_loop_io_init(&g_io);
-  exec_loop_init(&g_loop, &cfg, TIMEOUT, &g_io);
+  exec_loop_init(&g_loop, &cfg, TIMEOUT, TIMEOUT, &g_io);
   const double start[2] = {0.03, -0.04};
   enum { DEAD = 600, BACK = 1000, END = 3000 };  /* ms: planner killed / restarted / end */
   double key[4] = {0};
@@ -467,7 +467,7 @@ static void test_workspace_plans(void **state) {
   (void)state;
   const nd_exec_cfg cfg = nd_exec_cfg_default();
   exec_loop_io_init(&g_io);
-  exec_loop_init(&g_loop, &cfg, TIMEOUT, &g_io);
+  exec_loop_init(&g_loop, &cfg, TIMEOUT, TIMEOUT, &g_io);
   enum { IN = 500, BAD2 = 1000, END = 1500 };  /* ms: phase starts */
   const double start[2] = {0.1, 0.0}, out_key[4] = {0.8, 0.0, 0.0, 0.0};
   const double in_key[4] = {0.3, 0.1, 0.0, 0.0}, in_next[4] = {0.35, 0.1, 0.0, 0.0};
