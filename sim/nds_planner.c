@@ -51,6 +51,7 @@ void nds_planner_cfg_default(nds_planner_cfg *cfg) {
   cfg->limit_penalty = 10.0;
   cfg->w = nd_cost_weights_default();
   nds_ctrl_cfg_default(&cfg->ctrl);
+  cfg->free_flight = 1;
   cfg->seed = 1;
 }
 
@@ -138,6 +139,7 @@ nds_planner *nds_planner_create(const nds_model *model, const nds_planner_cfg *c
     nds_planner_free(p);
     return NULL;
   }
+  nds_batch_set_free_flight(p->batch, cfg->free_flight);
   nd_rng_seed(&p->rng, cfg->seed, 0);
   return p;
 }

@@ -24,6 +24,8 @@ typedef struct {
   double limit_penalty;     /* added cost per unit of relative excess over a limit */
   nd_cost_weights w;
   nds_ctrl_cfg ctrl;
+  int free_flight;          /* rollouts skip MuJoCo while the sphere is far from the object
+                             * (nds_rollout_ff); 1 by default */
   uint64_t seed;
 } nds_planner_cfg;
 

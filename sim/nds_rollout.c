@@ -25,20 +25,27 @@ static void fail(nds_rollout_out *out) {
 }
 
 /* Free flight's reach: the sphere is far when its centre is beyond the object's corner
- * circle (the half diagonal), its radius, this margin and twice its step's travel; the
- * object is at rest when no velocity component exceeds the thresholds (the rest jitter of
- * a box on MuJoCo's soft contacts is ~1e-5). */
+ * circle (the half diagonal), its radius, this margin and twice its step's travel. The
+ * object is at rest when MuJoCo's last step left it with no velocity or acceleration
+ * component above the thresholds: settled on its soft contact, not merely still (a box
+ * set down at rest sinks ~0.1 mm into the table over its first steps, and frozen before
+ * that it meets the sphere while still settling: 1-2 cm off after a push). */
 #define FF_MARGIN 0.005
-#define FF_REST_V 1e-3  /* m/s */
-#define FF_REST_W 1e-2  /* rad/s */
+#define FF_REST_V 1e-4  /* m/s */
+#define FF_REST_W 1e-3  /* rad/s */
+#define FF_REST_A 1e-2  /* m/s^2 */
+#define FF_REST_AW 1e-1 /* rad/s^2 */
 
 /* 1 if the step from d may skip MuJoCo: the sphere at pos, moving at vel, is out of reach
- * of an object at rest. */
-static int free_to_fly(const nds_model *nm, const mjData *d, const double pos[2],
+ * of an object at rest; stepped is 1 once MuJoCo has stepped d in this rollout. */
+static int free_to_fly(const nds_model *nm, const mjData *d, int stepped, const double pos[2],
                        const double vel[2], double reach, double dt) {
-  const double *ov = d->qvel + nm->obj_dof;
+  if (!stepped) return 0;
+  const double *ov = d->qvel + nm->obj_dof, *oa = d->qacc + nm->obj_dof;
   for (int k = 0; k < 3; k++)
-    if (fabs(ov[k]) > FF_REST_V || fabs(ov[3 + k]) > FF_REST_W) return 0;
+    if (fabs(ov[k]) > FF_REST_V || fabs(ov[3 + k]) > FF_REST_W || fabs(oa[k]) > FF_REST_A ||
+        fabs(oa[3 + k]) > FF_REST_AW)
+      return 0;
   const double *op = d->qpos + nm->obj_qpos;
   const double dist = hypot(pos[0] - op[0], pos[1] - op[1]);
   return dist > reach + 2.0 * dt * hypot(vel[0], vel[1]);
@@ -113,10 +120,12 @@ void nds_rollout_ff(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
       vel[k] = d->qvel[nm->ee_dof[k]];
     }
     nds_ctrl_pid(ctrl, &c, (const double(*)[4])s, pos, vel, dt, f);
-    if (ff && free_to_fly(nm, d, pos, vel, reach, dt)) {
+    /* The step moves the sphere by dt times its velocity after the step. */
+    const double vnext[2] = {vel[0] + dt * f[0] * inv_m, vel[1] + dt * f[1] * inv_m};
+    if (ff && free_to_fly(nm, d, n > skipped, pos, vnext, reach, dt)) {
       for (int k = 0; k < 2; k++) {
-        d->qvel[nm->ee_dof[k]] += dt * f[k] * inv_m;
-        d->qpos[nm->ee_qpos[k]] += dt * d->qvel[nm->ee_dof[k]];
+        d->qvel[nm->ee_dof[k]] = vnext[k];
+        d->qpos[nm->ee_qpos[k]] += dt * vnext[k];
       }
       d->time += dt;
       skipped++;

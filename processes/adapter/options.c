@@ -44,7 +44,7 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
                "also shrink the std (0.3 instead of 1 would give the truth a 19-std distance "
                "instead of 5.6)"},
       {"threads", ND_OPT_INT, &o->threads, 1, 256,
-       .def = "cores - 1 up to 4 cores, cores - 2 above, at least 1", .help = "replay workers"},
+       .def = "one per core", .help = "replay workers"},
       {"nice", ND_OPT_INT, &o->nice, 0, 19,
        .help = "scheduling niceness of the whole process: on a small machine refits must not "
                "slow the planner"},

@@ -132,8 +132,7 @@ int ndp_decode_why(int status, int size, const char *type, char *why, int len) {
 
 int ndp_default_threads(void) {
   long n = sysconf(_SC_NPROCESSORS_ONLN);
-  long t = n <= 4 ? n - 1 : n - 2;
-  return t < 1 ? 1 : (int)t;
+  return n < 1 ? 1 : (int)n;
 }
 
 void ndp_drain(lcm_t *lcm) {

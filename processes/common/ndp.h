@@ -132,8 +132,9 @@ void ndp_refused(ndp_ratelog *rl, const char *prog, const char *what, const char
  * -1 with why saying so ("N bytes do not decode as T", "N bytes after a T"). */
 int ndp_decode_why(int status, int size, const char *type, char *why, int len);
 
-/* Rollout workers that leave the 1 kHz processes a core: cores - 1 up to 4 cores,
- * cores - 2 above, at least 1. */
+/* Rollout workers: one per online core. They run at normal priority; the 1 kHz loops, their
+ * I/O threads and LCM's receive threads run SCHED_FIFO above them
+ * (doc/decisions.md#command-sampling). */
 int ndp_default_threads(void);
 
 /* Freshness of one periodic input stream. LCM drops the newest message when a

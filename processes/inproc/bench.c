@@ -16,6 +16,7 @@
 #include "nds_fit.h"
 #include "nds_planner.h"
 #include "nds_setup.h"
+#include "nds_world.h"
 
 static double now_s(void) {
   struct timespec ts;
@@ -88,8 +89,112 @@ static int record_push5(const nds_model *w, mjData *d, int i, nd_rollout *r) {
   return 0;
 }
 
+/* Sections of the bench, as --sections names them. */
+enum { SEC_PLAN = 1, SEC_PREDICT = 2, SEC_LAB = 4, SEC_FIT = 8 };
+static const char *const sec_words[] = {"plan", "predict", "lab", "fit"};
+
+static int parse_sections(const char *v, const char *what, void *dst, char *err, int errlen) {
+  int *sec = dst, n = 0;
+  *sec = 0;
+  for (const char *p = v; *p; n++) {
+    const size_t len = strcspn(p, ",");
+    int k = 0;
+    while (k < 4 && !(strlen(sec_words[k]) == len && !strncmp(p, sec_words[k], len))) k++;
+    if (k == 4) {
+      snprintf(err, errlen, "%s: '%.*s' is not one of plan, predict, lab, fit", what, (int)len, p);
+      return -1;
+    }
+    *sec |= 1 << k;
+    p += len + (p[len] == ',');
+  }
+  if (!n) {
+    snprintf(err, errlen, "%s: name at least one section", what);
+    return -1;
+  }
+  return 0;
+}
+
+/* The true object's planar pose in a world, from its free joint. */
+static void world_object(const nds_world *w, double xy[2], double *yaw) {
+  const mjModel *m = nds_world_mj_model(w);
+  const mjData *d = nds_world_mj_data(w);
+  const int j = m->body_jntadr[mj_name2id(m, mjOBJ_BODY, "object")];
+  const double *q = d->qpos + m->jnt_qposadr[j];
+  xy[0] = q[0], xy[1] = q[1];
+  *yaw = atan2(2 * (q[3] * q[6] + q[4] * q[5]), 1 - 2 * (q[5] * q[5] + q[6] * q[6]));
+}
+
+/* The segment duration, from T up in steps of 10 %, at which M chained segments from rest
+ * at start through keys peak within v_max and a_max (the executor's rule). */
+static double push_stretch(const double start[2], const double *keys, int M, double T,
+                           double v_max, double a_max) {
+  for (;; T *= 1.1) {
+    nd_snap_seg seg[ND_MAX_KEYS];
+    double sp[2][4] = {{start[0], 0, 0, 0}, {start[1], 0, 0, 0}}, v2 = 0, a2 = 0;
+    for (int k = 0; k < M; k++) {
+      nd_snap_seg_make(&seg[k], (const double(*)[4])sp, keys + 4 * k, keys + 4 * k + 2, T);
+      for (double t = 0; t <= T; t += 1e-3) {
+        nd_snap_seg_eval(&seg[k], t, sp);
+        v2 = fmax(v2, sp[0][ND_V] * sp[0][ND_V] + sp[1][ND_V] * sp[1][ND_V]);
+        a2 = fmax(a2, sp[0][ND_A] * sp[0][ND_A] + sp[1][ND_A] * sp[1][ND_A]);
+      }
+      nd_snap_seg_eval(&seg[k], T, sp);
+    }
+    if (sqrt(v2) <= v_max && sqrt(a2) <= a_max) return T;
+  }
+}
+
+/* The pushes of section 2 in a world (ideal or lab, 1 ms) tracking the chained segments
+ * (push i's segments last Ts[i]) as the executor sends them, then 0.2 s at rest: each
+ * step's cost, the sphere's tracking error (true position less setpoint), reflex stops,
+ * the object's pose at the horizon into obj[i] (x, y, yaw). Returns 0, or -1 with a
+ * message. */
+typedef struct {
+  double *step_us, *track;  /* per step */
+  int nstep, ntrack, stops;
+} world_figs;
+
+static int world_pushes(const nds_world_cfg *base, const double *keys, int n, int M,
+                        const double *Ts, double (*obj)[3], world_figs *f, char *err,
+                        int errlen) {
+  for (int i = 0; i < n; i++) {
+    const double T = Ts[i];
+    nds_world_cfg c = *base;
+    c.obj[0] = c.obj[1] = c.obj[2] = 0.0;
+    c.ee[0] = -0.08, c.ee[1] = 0.0;
+    nds_world *w = nds_world_create(&c, err, errlen);
+    if (!w) return -1;
+    nd_snap_seg seg[ND_MAX_KEYS];
+    double sp[2][4] = {{c.ee[0], 0, 0, 0}, {c.ee[1], 0, 0, 0}};
+    for (int k = 0; k < M; k++) {
+      nd_snap_seg_make(&seg[k], (const double(*)[4])sp, keys + 8 * i + 4 * k, keys + 8 * i + 4 * k + 2, T);
+      nd_snap_seg_eval(&seg[k], T, sp);
+    }
+    const double dt = nds_world_mj_model(w)->opt.timestep;
+    const int horizon = (int)lround(M * T / dt), hold = (int)lround(0.2 / dt);
+    nds_world_out out;
+    for (int s = 0; s < horizon + hold; s++) {
+      const double t = s < horizon ? s * dt : M * T;
+      int k = (int)(t / T);
+      if (k > M - 1) k = M - 1;
+      nd_snap_seg_eval(&seg[k], t - k * T, sp);
+      const double t0 = now_s();
+      nds_world_step(w, (const double(*)[4])sp, &out);
+      f->step_us[f->nstep++] = 1e6 * (now_s() - t0);
+      f->stops += out.stopped_now;
+      double ee[2];
+      nds_world_ee(w, ee);
+      if (s < horizon) f->track[f->ntrack++] = hypot(ee[0] - sp[0][ND_P], ee[1] - sp[1][ND_P]);
+      if (s == horizon - 1) world_object(w, obj[i], &obj[i][2]);
+    }
+    nds_world_free(w);
+  }
+  return 0;
+}
+
 int main(int argc, char **argv) {
   char err[512];
+  int sections = SEC_PLAN | SEC_PREDICT | SEC_LAB | SEC_FIT;
   int reps = 30;
   double plan_dt = 0.005, robust = NDS_FIT_ROBUST_SCALE;
   nd_opt opts[] = {
@@ -98,6 +203,12 @@ int main(int argc, char **argv) {
        .help = "planning model timestep, s"},
       {"robust", ND_OPT_DOUBLE, &robust, 1e-12, 1, .arg = "S",
        .help = "scale of the robust score timed as refit_s_10x5s_robust, m^2"},
+      {"sections", ND_OPT_CUSTOM, &sections, .parse = parse_sections, .arg = "LIST",
+       .def = "plan,predict,lab,fit",
+       .help = "what to measure: plan (mj_step rate, batches, plan latency with and without "
+               "free flight), predict (the planning model against the 1 ms world), lab (the "
+               "lab world: step cost, the arm's tracking, the planning model against it), "
+               "fit (the adapter's refit)"},
   };
   nd_opt_spec spec = {"nudge-bench", "[options]",
                       "Measures the raw mj_step rate, batched rollout efficiency on 1 and 2 "
@@ -142,60 +253,69 @@ int main(int argc, char **argv) {
   double raw_rate = nroll * (double)nsteps / (now_s() - t0);
   printf("raw mj_step: %.0f steps/s on one thread (%.2f us/step)\n", raw_rate, 1e6 / raw_rate);
 
-  /* 2. Batched rollouts on 1 and 2 workers, against the raw rate. */
   const int nbatch = 128;
   double *keys = malloc(sizeof(double) * nbatch * 8);
   nds_rollout_out *outs = malloc(sizeof(*outs) * nbatch);
   for (int i = 0; i < nbatch; i++) push_keys(i, keys + 8 * i);
-  double rate[3] = {0};
-  for (int w = 1; w <= 2; w++) {
-    nd_pool *pool = nd_pool_create(w, err, sizeof(err));
-    nds_batch *b = pool ? nds_batch_create(&nm, pool, err, sizeof(err)) : NULL;
-    if (!b) {
-      fprintf(stderr, "nudge-bench: %s\n", err);
-      return 1;
-    }
-    nds_batch_rollouts(b, &ctrl, &s0, sp0, keys, nbatch, M, T, outs);  /* warm caches */
-    const int rounds = 4;
-    t0 = now_s();
-    for (int r = 0; r < rounds; r++) nds_batch_rollouts(b, &ctrl, &s0, sp0, keys, nbatch, M, T, outs);
-    rate[w] = rounds * nbatch * (double)nsteps / (now_s() - t0);
-    printf("batched rollouts, %d worker(s): %.0f steps/s = %.2f x raw mj_step\n", w, rate[w],
-           rate[w] / raw_rate);
-    nds_batch_free(b);
-    nd_pool_free(pool);
-  }
-  double eff2 = rate[2] / (2.0 * raw_rate);
-  printf("parallel efficiency on 2 workers: %.2f of 2 x raw mj_step, %.2f of 2 x 1-worker batch\n",
-         eff2, rate[2] / (2.0 * rate[1]));
 
-  /* 3. Plan latency at the paper's settings on every core, warm-started like the MPC. */
-  const int settings[2][2] = {{128, 4}, {50, 2}};
-  double med[2], p90[2];
+  /* 2. Batched rollouts on 1 and 2 workers, against the raw rate. 3. Plan latency at the
+   * paper's settings on every core, warm-started like the MPC, with and without free flight;
+   * against brute force: N C rollouts of H / dt steps at the raw rate on every worker. */
+  double rate[3] = {0}, eff2 = 0, med[3] = {0}, p90[3] = {0}, brute_ms = 0;
   double *lat = malloc(sizeof(double) * reps);
   nd_pool *pool = su.pool;
-  for (int k = 0; k < 2; k++) {
-    nds_planner_cfg cfg;
-    nds_planner_cfg_default(&cfg);
-    cfg.pop = settings[k][0];
-    cfg.iters = settings[k][1];
-    nds_planner *p = nds_planner_create(&nm, &cfg, pool, err, sizeof(err));
-    if (!p) {
-      fprintf(stderr, "nudge-bench: %s\n", err);
-      return 1;
+  if (sections & SEC_PLAN) {
+    for (int w = 1; w <= 2; w++) {
+      nd_pool *bp = nd_pool_create(w, err, sizeof(err));
+      nds_batch *b = bp ? nds_batch_create(&nm, bp, err, sizeof(err)) : NULL;
+      if (!b) {
+        fprintf(stderr, "nudge-bench: %s\n", err);
+        return 1;
+      }
+      nds_batch_rollouts(b, &ctrl, &s0, sp0, keys, nbatch, M, T, outs);  /* warm caches */
+      const int rounds = 4;
+      t0 = now_s();
+      for (int r = 0; r < rounds; r++) nds_batch_rollouts(b, &ctrl, &s0, sp0, keys, nbatch, M, T, outs);
+      rate[w] = rounds * nbatch * (double)nsteps / (now_s() - t0);
+      printf("batched rollouts, %d worker(s): %.0f steps/s = %.2f x raw mj_step\n", w, rate[w],
+             rate[w] / raw_rate);
+      nds_batch_free(b);
+      nd_pool_free(bp);
     }
-    const nd_goal goal = {.x = 0.2, .y = 0.05, .yaw = 0.3};
-    nds_plan plan;
-    for (int r = 0; r < reps; r++) {
-      double t = now_s();
-      nds_planner_plan(p, &s0, sp0, &goal, &plan, err, sizeof(err));
-      lat[r] = 1e3 * (now_s() - t);
+    eff2 = rate[2] / (2.0 * raw_rate);
+    printf("parallel efficiency on 2 workers: %.2f of 2 x raw mj_step, %.2f of 2 x 1-worker batch\n",
+           eff2, rate[2] / (2.0 * rate[1]));
+
+    /* N 128 C 4; N 50 C 2 without and with free flight. */
+    const int settings[3][3] = {{128, 4, 1}, {50, 2, 0}, {50, 2, 1}};
+    for (int k = 0; k < 3; k++) {
+      nds_planner_cfg cfg;
+      nds_planner_cfg_default(&cfg);
+      cfg.pop = settings[k][0];
+      cfg.iters = settings[k][1];
+      cfg.free_flight = settings[k][2];
+      nds_planner *p = nds_planner_create(&nm, &cfg, pool, err, sizeof(err));
+      if (!p) {
+        fprintf(stderr, "nudge-bench: %s\n", err);
+        return 1;
+      }
+      const nd_goal goal = {.x = 0.2, .y = 0.05, .yaw = 0.3};
+      nds_plan plan;
+      for (int r = 0; r < reps; r++) {
+        double t = now_s();
+        nds_planner_plan(p, &s0, sp0, &goal, &plan, err, sizeof(err));
+        lat[r] = 1e3 * (now_s() - t);
+      }
+      med[k] = nd_quantile(lat, reps, 0.5);
+      p90[k] = nd_quantile(lat, reps, 0.9);
+      printf("plan N %3d C %d, H 0.6 s, M 2, %d workers, free flight %s: median %.1f ms, p90 "
+             "%.1f ms (%d rollouts)\n", cfg.pop, cfg.iters, nd_pool_size(pool),
+             cfg.free_flight ? "on" : "off", med[k], p90[k], plan.evals);
+      nds_planner_free(p);
     }
-    med[k] = nd_quantile(lat, reps, 0.5);
-    p90[k] = nd_quantile(lat, reps, 0.9);
-    printf("plan N %3d C %d, H 0.6 s, M 2, %d workers: median %.1f ms, p90 %.1f ms (%d rollouts)\n",
-           cfg.pop, cfg.iters, nd_pool_size(pool), med[k], p90[k], plan.evals);
-    nds_planner_free(p);
+    brute_ms = 1e3 * 50.0 * 2.0 * nsteps / (raw_rate * nd_pool_size(pool));
+    printf("brute force N 50 C 2 (%d steps each at the raw rate on %d workers): %.1f ms; plan "
+           "with free flight %.2f of it\n", nsteps, nd_pool_size(pool), brute_ms, med[2] / brute_ms);
   }
 
   /* 4. What the coarse planning step costs: the same pushes in the planning model and in
@@ -205,140 +325,225 @@ int main(int argc, char **argv) {
   mjData *dw = su.d;
   nds_rollout_out *ref = malloc(sizeof(*ref) * nbatch);
   double *perr = malloc(sizeof(double) * nbatch);
-  double moved = 0.0;
-  for (int i = 0; i < nbatch; i++) {
-    nds_rollout(&world, dw, &ctrl, &s0, sp0, keys + 8 * i, M, T, &ref[i]);
-    moved += hypot(ref[i].obj_xy[0] - s0.obj_pos[0], ref[i].obj_xy[1] - s0.obj_pos[1]) / nbatch;
-  }
-  const double dts[4] = {0.002, 0.005, 0.010, plan_dt};
   double pe_med = 0.0;
-  printf("planning step vs the 1 ms world, %d pushes over 0.6 s (object moved %.3f m on average):\n",
-         nbatch, moved);
-  for (int k = 0; k < 4; k++) {
-    if (k == 3 && (plan_dt == 0.002 || plan_dt == 0.005 || plan_dt == 0.010)) break;
-    nds_scene_cfg c = pc;
-    c.timestep = dts[k];
-    nds_model m2 = {0};
-    if (nds_model_init(&m2, &c, err, sizeof(err))) {
+  if (sections & SEC_PREDICT) {
+    double moved = 0.0;
+    for (int i = 0; i < nbatch; i++) {
+      nds_rollout(&world, dw, &ctrl, &s0, sp0, keys + 8 * i, M, T, &ref[i]);
+      moved += hypot(ref[i].obj_xy[0] - s0.obj_pos[0], ref[i].obj_xy[1] - s0.obj_pos[1]) / nbatch;
+    }
+    const double dts[4] = {0.002, 0.005, 0.010, plan_dt};
+    printf("planning step vs the 1 ms world, %d pushes over 0.6 s (object moved %.3f m on average):\n",
+           nbatch, moved);
+    for (int k = 0; k < 4; k++) {
+      if (k == 3 && (plan_dt == 0.002 || plan_dt == 0.005 || plan_dt == 0.010)) break;
+      nds_scene_cfg c = pc;
+      c.timestep = dts[k];
+      nds_model m2 = {0};
+      if (nds_model_init(&m2, &c, err, sizeof(err))) {
+        fprintf(stderr, "nudge-bench: %s\n", err);
+        return 1;
+      }
+      mjData *d2 = mj_makeData(m2.m);
+      t0 = now_s();
+      for (int i = 0; i < nbatch; i++) {
+        nds_rollout_out o;
+        nds_rollout(&m2, d2, &ctrl, &s0, sp0, keys + 8 * i, M, T, &o);
+        perr[i] = hypot(o.obj_xy[0] - ref[i].obj_xy[0], o.obj_xy[1] - ref[i].obj_xy[1]);
+      }
+      double ms = 1e3 * (now_s() - t0) / nbatch;
+      double med_k = nd_quantile(perr, nbatch, 0.5);
+      printf("  dt %.3f s: %.3f ms per rollout, object position error median %.4f m, max %.4f m\n",
+             dts[k], ms, med_k, perr[nbatch - 1]);
+      if (dts[k] == plan_dt) pe_med = med_k;
+      mj_deleteData(d2);
+      nds_model_free(&m2);
+    }
+  }
+
+  /* 6. The lab world: the same pushes (32 of them), slowed to what nudge-up --world lab
+   * lets the planner send (0.45 m/s, 1.8 m/s^2), tracked by the arm in 1 ms steps, each
+   * timed; the arm's tracking error and reflex stops; the planning model at 5 ms and at the
+   * live planner's 10 ms against the lab world's outcome, next to the same against the
+   * ideal world. */
+  enum { NLAB = 32 };
+  double lab_fig[12] = {0};
+  if (sections & SEC_LAB) {
+    static double step_us[2][NLAB * 4000], track[2][NLAB * 4000];
+    static double truth[2][NLAB][3];
+    double Ts[NLAB];
+    const double start[2] = {-0.08, 0.0};
+    for (int i = 0; i < NLAB; i++) Ts[i] = push_stretch(start, keys + 8 * i, M, T, 0.45, 1.8);
+    world_figs wf[2] = {{step_us[0], track[0], 0, 0, 0}, {step_us[1], track[1], 0, 0, 0}};
+    nds_world_cfg wcfg[2];
+    nds_world_cfg_default(&wcfg[0]);
+    nds_world_cfg_lab(&wcfg[1]);
+    for (int k = 0; k < 2; k++)
+      if (world_pushes(&wcfg[k], keys, NLAB, M, Ts, truth[k], &wf[k], err, sizeof(err))) {
+        fprintf(stderr, "nudge-bench: %s\n", err);
+        return 1;
+      }
+    const double pdts[2] = {0.005, 0.010};
+    double pe[2][2];
+    for (int j = 0; j < 2; j++) {
+      nds_scene_cfg c = pc;
+      c.timestep = pdts[j];
+      nds_model m2 = {0};
+      if (nds_model_init(&m2, &c, err, sizeof(err))) {
+        fprintf(stderr, "nudge-bench: %s\n", err);
+        return 1;
+      }
+      mjData *d2 = mj_makeData(m2.m);
+      nds_state s8;
+      double sp8[2][4];
+      push_start(&m2, &s8, sp8);
+      for (int k = 0; k < 2; k++) {
+        for (int i = 0; i < NLAB; i++) {
+          nds_rollout_out o;
+          nds_rollout(&m2, d2, &ctrl, &s8, sp8, keys + 8 * i, M, Ts[i], &o);
+          perr[i] = hypot(o.obj_xy[0] - truth[k][i][0], o.obj_xy[1] - truth[k][i][1]);
+        }
+        pe[j][k] = nd_quantile(perr, NLAB, 0.5);
+      }
+      mj_deleteData(d2);
+      nds_model_free(&m2);
+    }
+    const double lab_mean = nd_stats_of(step_us[1], wf[1].nstep).mean;
+    lab_fig[0] = nd_quantile(step_us[1], wf[1].nstep, 0.5);
+    lab_fig[1] = nd_quantile(step_us[1], wf[1].nstep, 0.99);
+    lab_fig[2] = lab_mean / 1000.0;
+    lab_fig[3] = nd_quantile(step_us[0], wf[0].nstep, 0.5);
+    lab_fig[4] = 1e3 * nd_quantile(track[1], wf[1].ntrack, 0.5);
+    lab_fig[5] = 1e3 * nd_quantile(track[1], wf[1].ntrack, 0.99);
+    lab_fig[6] = pe[0][1], lab_fig[7] = pe[0][0], lab_fig[8] = pe[1][1], lab_fig[9] = pe[1][0];
+    lab_fig[10] = wf[1].stops;
+    lab_fig[11] = nd_quantile(Ts, NLAB, 0.5);
+    printf("lab world, %d pushes (segments of %.2f s median): %d reflex stops; step p50 %.1f us, p99 %.1f us, mean %.1f us (%.1f %% of a core "
+           "at 1 kHz; the ideal world's p50 %.1f us); the arm's tracking error p50 %.2f mm, "
+           "p99 %.2f mm\n", NLAB, lab_fig[11], wf[1].stops, lab_fig[0], lab_fig[1], lab_mean, 100 * lab_fig[2],
+           lab_fig[3], lab_fig[4], lab_fig[5]);
+    printf("planning model against the world's outcome after 0.6 s, object position error "
+           "median: 5 ms model: lab %.4f m, ideal %.4f m; 10 ms model: lab %.4f m, ideal %.4f m\n",
+           pe[0][1], pe[0][0], pe[1][1], pe[1][0]);
+  }
+
+  if (sections & SEC_FIT) {
+    /* 5. The adapter's refit: CEM at the paper's Q 32, C 2 on 2 workers over a buffer of ten
+     * 5 s pushes recorded in the 1 ms world, from a D = 1 prior; in the fit's default replay
+     * mode with two record steps per model step and the adapter's window, as the adapter runs
+     * it (a 2 ms model, whose replay of the true theta is not exact: its L(theta_true) says
+     * how far the coarse step strays), in a 1 ms one, in the other replay mode at 1 ms for
+     * comparison, ranked by the robust score (--robust; NDS_FIT_ROBUST_SCALE by default),
+     * and with the study's 5 ms window at the adapter's step. */
+    enum { NREC = 10 };
+    nd_rollout recs[NREC];
+    for (int i = 0; i < NREC; i++) {
+      if (record_push5(&world, dw, i, &recs[i])) {
+        fprintf(stderr, "nudge-bench: out of memory\n");
+        return 1;
+      }
+    }
+    nd_pool *fpool = nd_pool_create(2, err, sizeof(err));
+    if (!fpool) {
       fprintf(stderr, "nudge-bench: %s\n", err);
       return 1;
     }
-    mjData *d2 = mj_makeData(m2.m);
-    t0 = now_s();
-    for (int i = 0; i < nbatch; i++) {
-      nds_rollout_out o;
-      nds_rollout(&m2, d2, &ctrl, &s0, sp0, keys + 8 * i, M, T, &o);
-      perr[i] = hypot(o.obj_xy[0] - ref[i].obj_xy[0], o.obj_xy[1] - ref[i].obj_xy[1]);
-    }
-    double ms = 1e3 * (now_s() - t0) / nbatch;
-    double med_k = nd_quantile(perr, nbatch, 0.5);
-    printf("  dt %.3f s: %.3f ms per rollout, object position error median %.4f m, max %.4f m\n",
-           dts[k], ms, med_k, perr[nbatch - 1]);
-    if (dts[k] == plan_dt) pe_med = med_k;
-    mj_deleteData(d2);
-    nds_model_free(&m2);
-  }
-
-  /* 5. The adapter's refit: CEM at the paper's Q 32, C 2 on 2 workers over a buffer of ten
-   * 5 s pushes recorded in the 1 ms world, from a D = 1 prior; in the fit's default replay
-   * mode with two record steps per model step and the adapter's window, as the adapter runs
-   * it (a 2 ms model, whose replay of the true theta is not exact: its L(theta_true) says
-   * how far the coarse step strays), in a 1 ms one, in the other replay mode at 1 ms for
-   * comparison, ranked by the robust score (--robust; NDS_FIT_ROBUST_SCALE by default),
-   * and with the study's 5 ms window at the adapter's step. */
-  enum { NREC = 10 };
-  nd_rollout recs[NREC];
-  for (int i = 0; i < NREC; i++) {
-    if (record_push5(&world, dw, i, &recs[i])) {
-      fprintf(stderr, "nudge-bench: out of memory\n");
-      return 1;
-    }
-  }
-  nd_pool *fpool = nd_pool_create(2, err, sizeof(err));
-  if (!fpool) {
-    fprintf(stderr, "nudge-bench: %s\n", err);
-    return 1;
-  }
-  nds_fit_cfg dcfg;
-  nds_fit_cfg_default(&dcfg);
-  const int dmode = dcfg.replay.mode;
-  const int omode = dmode == NDS_REPLAY_SETPOINT ? NDS_REPLAY_FORCE : NDS_REPLAY_SETPOINT;
-  /* The adapter's default model step and window first (nudge-adapter --replay-dt,
-   * --replay-window); last, its model step with the study's window (nds_fit's default,
-   * for poses observed at every step). */
-  enum { NFIT = 5 };
-  const double W = NDS_FIT_WINDOW_MOCAP;
-  double refit_s[NFIT] = {0}, fit_dt[NFIT] = {0.002, 0.001, 0.001, 0.002, 0.002};
-  const int fit_mode[NFIT] = {dmode, dmode, omode, dmode, dmode};
-  const double fit_robust[NFIT] = {dcfg.robust, dcfg.robust, dcfg.robust, robust, dcfg.robust};
-  const double fit_window[NFIT] = {W, W, W, W, dcfg.replay.window};
-  /* The adapter's configuration is timed REFIT_REPS times (same seed, so the same work):
-   * its figure is the median, as the target is checked against it. */
-  enum { REFIT_REPS = 3 };
-  double rep_s[REFIT_REPS] = {0};
-  for (int k = 0; k < NFIT; k++) {
-    const int reps = k == 0 ? REFIT_REPS : 1;
-    for (int rep = 0; rep < reps; rep++) {
-      nds_scene_cfg fc = wc;
-      fc.timestep = fit_dt[k];
-      nds_model fm = {0};
-      nds_fit_cfg cfg;
-      nds_fit_cfg_default(&cfg);
-      cfg.replay.mode = fit_mode[k];
-      cfg.replay.window = fit_window[k];
-      cfg.robust = fit_robust[k];
-      nd_rng rr;
-      nd_rng_seed(&rr, 1, 7);
-      nds_fit_paper_prior(nd_theta_true, 1.0, cfg.lower, &rr, cfg.mu0, cfg.sigma0);
-      cfg.mu0[ND_TH_MASS] = nd_theta_true[ND_TH_MASS];
-      nds_fit *fit = NULL;
-      nds_fit_out fo;
-      double l_true = 0;
-      if (nds_model_init(&fm, &fc, err, sizeof(err)) ||
-          !(fit = nds_fit_create(&fm, &cfg, fpool, err, sizeof(err))) ||
-          nds_fit_loss(fit, nd_theta_true, recs, NREC, &l_true, NULL, err, sizeof(err))) {
-        fprintf(stderr, "nudge-bench: %s\n", err);
-        return 1;
+    nds_fit_cfg dcfg;
+    nds_fit_cfg_default(&dcfg);
+    const int dmode = dcfg.replay.mode;
+    const int omode = dmode == NDS_REPLAY_SETPOINT ? NDS_REPLAY_FORCE : NDS_REPLAY_SETPOINT;
+    /* The adapter's default model step and window first (nudge-adapter --replay-dt,
+     * --replay-window); last, its model step with the study's window (nds_fit's default,
+     * for poses observed at every step). */
+    enum { NFIT = 5 };
+    const double W = NDS_FIT_WINDOW_MOCAP;
+    double refit_s[NFIT] = {0}, fit_dt[NFIT] = {0.002, 0.001, 0.001, 0.002, 0.002};
+    const int fit_mode[NFIT] = {dmode, dmode, omode, dmode, dmode};
+    const double fit_robust[NFIT] = {dcfg.robust, dcfg.robust, dcfg.robust, robust, dcfg.robust};
+    const double fit_window[NFIT] = {W, W, W, W, dcfg.replay.window};
+    /* The adapter's configuration is timed REFIT_REPS times (same seed, so the same work):
+     * its figure is the median, as the target is checked against it. */
+    enum { REFIT_REPS = 3 };
+    double rep_s[REFIT_REPS] = {0};
+    for (int k = 0; k < NFIT; k++) {
+      const int reps = k == 0 ? REFIT_REPS : 1;
+      for (int rep = 0; rep < reps; rep++) {
+        nds_scene_cfg fc = wc;
+        fc.timestep = fit_dt[k];
+        nds_model fm = {0};
+        nds_fit_cfg cfg;
+        nds_fit_cfg_default(&cfg);
+        cfg.replay.mode = fit_mode[k];
+        cfg.replay.window = fit_window[k];
+        cfg.robust = fit_robust[k];
+        nd_rng rr;
+        nd_rng_seed(&rr, 1, 7);
+        nds_fit_paper_prior(nd_theta_true, 1.0, cfg.lower, &rr, cfg.mu0, cfg.sigma0);
+        cfg.mu0[ND_TH_MASS] = nd_theta_true[ND_TH_MASS];
+        nds_fit *fit = NULL;
+        nds_fit_out fo;
+        double l_true = 0;
+        if (nds_model_init(&fm, &fc, err, sizeof(err)) ||
+            !(fit = nds_fit_create(&fm, &cfg, fpool, err, sizeof(err))) ||
+            nds_fit_loss(fit, nd_theta_true, recs, NREC, &l_true, NULL, err, sizeof(err))) {
+          fprintf(stderr, "nudge-bench: %s\n", err);
+          return 1;
+        }
+        t0 = now_s();
+        if (nds_fit_run(fit, recs, NREC, &fo, err, sizeof(err))) {
+          fprintf(stderr, "nudge-bench: %s\n", err);
+          return 1;
+        }
+        refit_s[k] = now_s() - t0;
+        if (k == 0) rep_s[rep] = refit_s[k];
+        printf("refit %d x 5 s, Q %d C %d, 2 workers, %s replay%s, model dt %.3f s, window "
+               "%g s, robust %g: %.2f s (%d replays), sliding %.3f -> %.3f, L(mean) %.3g, "
+               "L(theta_true) %.3g\n",
+               NREC, cfg.pop, cfg.iters, nds_replay_mode_name(fit_mode[k]),
+               k == 0 ? " (the adapter's default)" : "", fit_dt[k], cfg.replay.window, cfg.robust,
+               refit_s[k],
+               fo.replays,
+               cfg.mu0[0], fo.mean[0], fo.loss_mean, l_true);
+        nds_fit_free(fit);
+        nds_model_free(&fm);
       }
-      t0 = now_s();
-      if (nds_fit_run(fit, recs, NREC, &fo, err, sizeof(err))) {
-        fprintf(stderr, "nudge-bench: %s\n", err);
-        return 1;
-      }
-      refit_s[k] = now_s() - t0;
-      if (k == 0) rep_s[rep] = refit_s[k];
-      printf("refit %d x 5 s, Q %d C %d, 2 workers, %s replay%s, model dt %.3f s, window "
-             "%g s, robust %g: %.2f s (%d replays), sliding %.3f -> %.3f, L(mean) %.3g, "
-             "L(theta_true) %.3g\n",
-             NREC, cfg.pop, cfg.iters, nds_replay_mode_name(fit_mode[k]),
-             k == 0 ? " (the adapter's default)" : "", fit_dt[k], cfg.replay.window, cfg.robust,
-             refit_s[k],
-             fo.replays,
-             cfg.mu0[0], fo.mean[0], fo.loss_mean, l_true);
-      nds_fit_free(fit);
-      nds_model_free(&fm);
     }
+    refit_s[0] = nd_quantile(rep_s, REFIT_REPS, 0.5);  /* sorts rep_s */
+    printf("refit in the adapter's configuration, %d times: median %.2f s (%.2f..%.2f)\n",
+           REFIT_REPS, refit_s[0], rep_s[0], rep_s[REFIT_REPS - 1]);
+    nd_pool_free(fpool);
+    for (int i = 0; i < NREC; i++) nd_rollout_free(&recs[i]);
+    printf("refit_s_10x5s %.2f s\n", refit_s[0]);
+    printf("refit_s_10x5s_1ms %.2f s\n", refit_s[1]);
+    /* The other replay mode at 1 ms, by name. */
+    printf("refit_s_10x5s_1ms_%s %.2f s\n", nds_replay_mode_name(omode), refit_s[2]);
+    printf("refit_s_10x5s_robust %.2f s\n", refit_s[3]);
+    printf("refit_s_10x5s_window5ms %.2f s\n", refit_s[4]);
   }
-  refit_s[0] = nd_quantile(rep_s, REFIT_REPS, 0.5);  /* sorts rep_s */
-  printf("refit in the adapter's configuration, %d times: median %.2f s (%.2f..%.2f)\n",
-         REFIT_REPS, refit_s[0], rep_s[0], rep_s[REFIT_REPS - 1]);
-  nd_pool_free(fpool);
-  for (int i = 0; i < NREC; i++) nd_rollout_free(&recs[i]);
-  printf("refit_s_10x5s %.2f s\n", refit_s[0]);
-  printf("refit_s_10x5s_1ms %.2f s\n", refit_s[1]);
-  /* The other replay mode at 1 ms, by name. */
-  printf("refit_s_10x5s_1ms_%s %.2f s\n", nds_replay_mode_name(omode), refit_s[2]);
-  printf("refit_s_10x5s_robust %.2f s\n", refit_s[3]);
-  printf("refit_s_10x5s_window5ms %.2f s\n", refit_s[4]);
 
   printf("mj_step_rate %.0f steps/s\n", raw_rate);
-  printf("rollout_ratio_1w %.3f ratio\n", rate[1] / raw_rate);
-  printf("rollout_efficiency_2w %.3f ratio\n", eff2);
-  printf("plan_ms_median_n128_c4 %.1f ms\n", med[0]);
-  printf("plan_ms_median_n50_c2 %.1f ms\n", med[1]);
-  printf("plan_ms_p90_n50_c2 %.1f ms\n", p90[1]);
+  if (sections & SEC_PLAN) {
+    printf("rollout_ratio_1w %.3f ratio\n", rate[1] / raw_rate);
+    printf("rollout_efficiency_2w %.3f ratio\n", eff2);
+    printf("plan_ms_median_n128_c4 %.1f ms\n", med[0]);
+    printf("plan_ms_median_n50_c2_no_ff %.1f ms\n", med[1]);
+    printf("plan_ms_median_n50_c2 %.1f ms\n", med[2]);
+    printf("plan_ms_p90_n50_c2 %.1f ms\n", p90[2]);
+    printf("plan_ff_speedup_n50_c2 %.2f ratio\n", med[1] / med[2]);
+    printf("plan_brute_ratio_n50_c2 %.3f ratio\n", med[2] / brute_ms);
+  }
   printf("plan_dt %.4f s\n", plan_dt);
-  printf("prediction_error_m %.4f m\n", pe_med);
+  if (sections & SEC_PREDICT) printf("prediction_error_m %.4f m\n", pe_med);
+  if (sections & SEC_LAB) {
+    printf("lab_step_us_p50 %.1f us\nlab_step_us_p99 %.1f us\n", lab_fig[0], lab_fig[1]);
+    printf("lab_step_core_share %.3f of_core\nideal_step_us_p50 %.1f us\n", lab_fig[2], lab_fig[3]);
+    printf("lab_track_err_p50 %.2f mm\nlab_track_err_p99 %.2f mm\n", lab_fig[4], lab_fig[5]);
+    printf("lab_reflex_stops %.0f count\n", lab_fig[10]);
+    printf("prediction_error_lab_5ms %.4f m\nprediction_error_ideal_5ms %.4f m\n", lab_fig[6],
+           lab_fig[7]);
+    printf("prediction_error_lab_10ms %.4f m\nprediction_error_ideal_10ms %.4f m\n", lab_fig[8],
+           lab_fig[9]);
+  }
 
   free(perr);
   free(ref);

@@ -22,8 +22,9 @@ int main(int argc, char **argv) {
       {"lcm-url", ND_OPT_STRING, &o.url, .arg = "URL", .def = "$LCM_DEFAULT_URL, else " NDP_DEFAULT_URL,
        .help = "LCM URL"},
       {"threads", ND_OPT_INT, &o.threads, 1, 256,
-       .def = "cores - 1 up to 4 cores, cores - 2 above, at least 1",
-       .help = "rollout workers (the 1 kHz processes need a core)"},
+       .def = "one per core",
+       .help = "rollout workers, at normal priority below the 1 kHz processes' real-time "
+               "threads"},
       {"pop", ND_OPT_INT, &o.pop, 4, 100000, .help = "iCEM population N (the paper's robot setting)"},
       {"iters", ND_OPT_INT, &o.iters, 1, 100, .help = "iCEM iterations C (the paper's robot setting)"},
       {"plan-dt", ND_OPT_DOUBLE, &o.plan_dt, 1e-4, 0.01, .arg = "S",
@@ -46,6 +47,9 @@ int main(int argc, char **argv) {
                "which refuses plans beyond its own (nudge-up --world lab sets both)"},
       {"a-max", ND_OPT_DOUBLE, &pc.a_max, 1e-3, 1000.0, .arg = "M/S2",
        .help = "end-effector acceleration a plan may reach; below nudge-executor's --a-max"},
+      {"segment-time", ND_OPT_DOUBLE, &pc.T, 0.05, 2.0, .arg = "S",
+       .help = "duration of each keypoint's minimum-snap segment (the horizon is M times it); "
+               "slower arms need longer ones to move as far"},
   };
   nd_opt_spec spec = {PROG, "[options]",
                       "MPC planner: plans minimum-snap keypoints with iCEM on MuJoCo rollouts "

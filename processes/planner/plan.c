@@ -17,15 +17,14 @@ int planner_plan_once(planner_proc *p, double now, char *err, int errlen) {
     s.ee_vel[k] = p->rs.ee_vel[k];
   }
   /* The executor starts the plan's first segment from its setpoint, so the rollouts must
-   * too. No setpoint yet, or the executor has gone quiet: the robot holds where it is.
-   * Jerk is not published; 0 is the smooth assumption. */
+   * too. No setpoint yet, or the executor has gone quiet: the robot holds where it is. */
   double sp0[2][4];
   const int cmd_ok = ndp_input_fresh(&p->in_cmd, now, o->state_timeout);
   for (int k = 0; k < 2; k++) {
     sp0[k][0] = cmd_ok ? p->cmd.p[k] : p->rs.ee_pos[k];
     sp0[k][1] = cmd_ok ? p->cmd.v[k] : 0.0;
     sp0[k][2] = cmd_ok ? p->cmd.a[k] : 0.0;
-    sp0[k][3] = 0.0;
+    sp0[k][3] = cmd_ok ? p->cmd.j[k] : 0.0;
   }
   const nd_goal goal = {.x = p->task.goal_x, .y = p->task.goal_y, .yaw = p->task.goal_yaw};
 

@@ -3,6 +3,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "nd_math.h"
 #include "nd_snap.h"
 #include "nd_test.h"
 #include "nds_test.h"
@@ -315,6 +316,58 @@ static void test_divergence(void **state) {
   nds_model_free(&nm);
 }
 
+/* Free flight changes no outcome: 96 random plans from starts far from, near and touching
+ * the box, at the planner's 10 ms and 5 ms steps, end with the object and the sphere where
+ * full MuJoCo steps put them (within 10 um, far below motion capture's 0.1 mm), and skip
+ * steps only while the sphere is out of reach. */
+static void test_free_flight_agrees(void **state) {
+  (void)state;
+  const double dts[2] = {0.01, 0.005};
+  const double starts[3][2] = {{-0.30, 0.20}, {-0.12, 0.0}, {-0.076, 0.0}};
+  uint64_t rng = 99;
+  double worst_obj = 0, worst_ee = 0;
+  long skipped = 0, steps = 0, far_skipped = 0, far_steps = 0;
+  for (int k = 0; k < 2; k++) {
+    nds_model nm;
+    nds_test_build(&nm, dts[k], NULL);
+    mjData *d = mj_makeData(nm.m);
+    nds_ctrl_cfg ctrl;
+    nds_ctrl_cfg_default(&ctrl);
+    for (int i = 0; i < 48; i++) {
+      const double *e = starts[i % 3];
+      nds_state s0;
+      double sp0[2][4], keys[8];
+      nds_state_rest(&nm, 0, 0, 0, e, &s0);
+      sp_at(e[0], e[1], sp0);
+      for (int j = 0; j < 8; j++) {
+        rng = rng * 6364136223846793005ULL + 1442695040888963407ULL;
+        const double u = (double)(rng >> 11) / 9007199254740992.0 - 0.5;
+        keys[j] = j % 4 < 2 ? e[j % 4] + 0.4 * u : 0.6 * u;
+      }
+      nds_rollout_out full, ff;
+      nds_rollout_ff(&nm, d, &ctrl, &s0, (const double(*)[4])sp0, keys, 2, 0.3, 0, &full);
+      nds_rollout_ff(&nm, d, &ctrl, &s0, (const double(*)[4])sp0, keys, 2, 0.3, 1, &ff);
+      assert_int_equal(full.diverged, 0);
+      assert_int_equal(ff.diverged, 0);
+      assert_int_equal(full.skipped, 0);
+      worst_obj = fmax(worst_obj, hypot(ff.obj_xy[0] - full.obj_xy[0], ff.obj_xy[1] - full.obj_xy[1]));
+      worst_obj = fmax(worst_obj, 0.05 * fabs(nd_wrap_angle(ff.obj_yaw - full.obj_yaw)));
+      worst_ee = fmax(worst_ee, hypot(ff.ee_xy[0] - full.ee_xy[0], ff.ee_xy[1] - full.ee_xy[1]));
+      skipped += ff.skipped, steps += ff.steps;
+      if (i % 3 == 0) far_skipped += ff.skipped, far_steps += ff.steps;
+      if (i % 3 == 2) assert_true(ff.skipped < ff.steps);
+    }
+    mj_deleteData(d);
+    nds_model_free(&nm);
+  }
+  printf("free_flight_worst_object %.2e m\nfree_flight_worst_sphere %.2e m\n", worst_obj, worst_ee);
+  printf("free_flight_skipped %.3f of steps (from far: %.3f)\n", (double)skipped / steps,
+         (double)far_skipped / far_steps);
+  assert_true(worst_obj < 1e-5);
+  assert_true(worst_ee < 1e-5);
+  assert_true(far_skipped > far_steps / 2);
+}
+
 int main(void) {
   nds_test_catch_warnings();
   const struct CMUnitTest tests[] = {
@@ -323,6 +376,7 @@ int main(void) {
       cmocka_unit_test(test_friction_changes_push),
       cmocka_unit_test(test_deterministic),
       cmocka_unit_test(test_divergence),
+      cmocka_unit_test(test_free_flight_agrees),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
