@@ -41,7 +41,8 @@ cd "$root"
 # libqhull-dev: MuJoCo's CMake config names its headers; libjchart2d-java: lcm-spy's charts.
 packages=(build-essential cmake pkg-config libmujoco-dev libqhull-dev liblcm-dev liblcm-bin
           liblcm-java libjchart2d-java default-jdk-headless libcmocka-dev zlib1g-dev iproute2
-          util-linux procps gnuplot-nox clang libclang-rt-14-dev)
+          util-linux procps gnuplot-nox clang libclang-rt-14-dev
+          libglfw3-dev libgl1-mesa-dri xvfb xauth ffmpeg xdotool)
 
 missing=()
 for p in "${packages[@]}"; do
