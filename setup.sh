@@ -12,7 +12,8 @@ usage() {
 usage: ./setup.sh [COMMAND] [ARGS...]
 
   demo [ARGS]   set up, build, and run the process system pushing the object to 5 goals
-                in emulation (nudge-up demo; ARGS go to it, see build/bin/nudge-up --help)
+                in emulation (nudge-up demo --view auto: in a window on a desktop, else
+                an MP4 of the run; ARGS go to nudge-up, see build/bin/nudge-up --help)
   test          set up, build, and run every test (ctest)
   test-asan     set up, build with AddressSanitizer + UBSan into build-asan/, run the unit
                 tests and the process tests (every nudge program instrumented; a sanitizer
@@ -112,6 +113,9 @@ case "$cmd" in
   build) build build ;;
   demo)
     build build
+    # The view: a window on a desktop, else an MP4 of the run (nudge-up --view auto); an
+    # explicit --view among ARGS wins.
+    set -- --view auto "$@"
     if ip route get 239.255.76.67 >/dev/null 2>&1; then
       exec "$root/build/bin/nudge-up" demo "$@"
     fi

@@ -422,7 +422,7 @@ int main(int argc, char **argv) {
            "at 1 kHz; the ideal world's p50 %.1f us); the arm's tracking error p50 %.2f mm, "
            "p99 %.2f mm\n", NLAB, lab_fig[11], wf[1].stops, lab_fig[0], lab_fig[1], lab_mean, 100 * lab_fig[2],
            lab_fig[3], lab_fig[4], lab_fig[5]);
-    printf("planning model against the world's outcome after 0.6 s, object position error "
+    printf("planning model against the world's outcome at the pushes' end, object position error "
            "median: 5 ms model: lab %.4f m, ideal %.4f m; 10 ms model: lab %.4f m, ideal %.4f m\n",
            pe[0][1], pe[0][0], pe[1][1], pe[1][0]);
   }

@@ -291,6 +291,8 @@ bad nudge-up "--workspace|'1,2,3'|XLO,YLO,XHI,YHI" --workspace 1,2,3
 bad nudge-up "--workspace|'1,2,3,4;touch x'" --workspace '1,2,3,4;touch x'
 bad nudge-up "--workspace needs a value" --workspace
 bad nudge-up "--world: expected ideal or lab, got 'moon'" --world moon
+bad nudge-up "--view: expected window, mp4, auto or off, got 'vr'" demo --view vr
+bad nudge-up "--view is for 'nudge-up demo'" run --view mp4
 
 # Stand-ins for the programs: each records its argv (NUL-separated), its pid and its umask,
 # then runs until SIGINT/SIGTERM; nudge-tasks exits at once; nudge-status --wait says
