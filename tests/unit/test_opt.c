@@ -57,7 +57,8 @@ static void setup_table(void) {
 
 /* Run the parser on the words of args (space-separated), capturing stdout and stderr. */
 static int run(const char *args, char *out, char *errs, size_t cap) {
-  char buf[512], *argv[32];
+  static char buf[512]; /* argv points into it after the call: ND_OPT_STRING keeps it */
+  char *argv[32];
   int argc = 0;
   argv[argc++] = "nd-test";
   snprintf(buf, sizeof buf, "%s", args);
