@@ -39,9 +39,9 @@ typedef struct {
   double now;           /* monotonic s: when the cycle started */
   int64_t utime;        /* wall-clock us of deadline */
   int64_t utime_now;    /* wall-clock us of now: the same instant as now, through an offset
-                         * between the clocks measured outside the cycles (two clock reads
-                         * a preemption apart would stamp a setpoint with another time
-                         * than it is for: 90 us seen, 13 um at 0.14 m/s) */
+                         * between the clocks measured outside the cycles, so a preemption
+                         * between two clock reads cannot stamp a setpoint with another
+                         * time than it is for (doc/decisions.md#command-sampling) */
   int catching_up;      /* 1 for the extra cycles of a CATCH_UP wake-up */
 } nd_rtloop_tick;
 

@@ -262,6 +262,10 @@ void nds_panda_monitor_reset(nds_panda_monitor *mo, double dt, int accel_window)
  * and a sustained excess still shows within 50 ms. */
 #define NDS_PANDA_ACCEL_WINDOW_PUSH 50
 
+/* A new motion starts from where the robot holds: forget the commanded positions, so the
+ * Cartesian checks difference only the new motion's commands. */
+void nds_panda_monitor_new_motion(nds_panda_monitor *mo);
+
 /* One control cycle's check, in this order: measured joint positions against the limits
  * less libfranka's kLimitEps, velocities against libfranka's kMaxJointVelocity,
  * accelerations (velocity differenced over the window) against kMaxJointAcceleration,

@@ -225,6 +225,8 @@ void nds_panda_monitor_reset(nds_panda_monitor *mo, double dt, int accel_window)
   mo->accel_window = w > NDS_PANDA_ACCEL_WINDOW_MAX ? NDS_PANDA_ACCEL_WINDOW_MAX : w;
 }
 
+void nds_panda_monitor_new_motion(nds_panda_monitor *mo) { mo->n_p = 0; }
+
 static void set_reflex(nds_panda_reflex *r, nds_panda_reflex_kind kind, int joint,
                        double value, double limit) {
   if (r->kind != NDS_PANDA_REFLEX_NONE) return;

@@ -257,7 +257,7 @@ void nds_world_resume(nds_world *w) {
   nds_panda_monitor_reset(&w->mon, w->m->opt.timestep, NDS_PANDA_ACCEL_WINDOW_PUSH);
 }
 
-void nds_world_motion_start(nds_world *w) { w->mon.n_p = 0; }
+void nds_world_motion_start(nds_world *w) { nds_panda_monitor_new_motion(&w->mon); }
 
 /* MuJoCo resets mjData to qpos0 by itself on a bad qacc and only counts a warning: look at
  * both the counters (cleared before each step) and the configuration. */

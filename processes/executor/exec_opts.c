@@ -10,8 +10,8 @@ int exec_options(int argc, char **argv, exec_opts *o) {
   nd_rtloop_cfg_default(&o->rt);
   o->timeout = 0.1;
   /* Plans come at the planner's rate (the paper's robot: 10 Hz), each a segment of 0.3 s
-   * or more: 0.3 s rides over a late plan or two without braking, where the state's 0.1 s
-   * braked the arm between most plans below 10 Hz (doc/decisions.md#plan-timeout). */
+   * or more: following one for 0.3 s rides over a late plan or two without braking
+   * (doc/decisions.md#plan-timeout). */
   o->plan_timeout = 0.3;
   int no_rt = 0;
   char ws_help[300];

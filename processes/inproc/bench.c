@@ -10,6 +10,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "nd_math.h"
 #include "nd_opt.h"
 #include "nd_stats.h"
 #include "nd_snap.h"
@@ -25,12 +26,13 @@ static double now_s(void) {
 }
 
 /* The start of a push: object at the origin, sphere 8 cm behind it, setpoint at the sphere. */
+static const double push_ee[2] = {-0.08, 0.0};
+
 static void push_start(const nds_model *nm, nds_state *s, double sp[2][4]) {
-  const double ee[2] = {-0.08, 0.0};
-  nds_state_rest(nm, 0.0, 0.0, 0.0, ee, s);
+  nds_state_rest(nm, 0.0, 0.0, 0.0, push_ee, s);
   memset(sp, 0, 8 * sizeof(double));
-  sp[0][0] = ee[0];
-  sp[1][0] = ee[1];
+  sp[0][0] = push_ee[0];
+  sp[1][0] = push_ee[1];
 }
 
 /* A family of pushing keypoint sequences through the object, varied by i. */
@@ -121,7 +123,7 @@ static void world_object(const nds_world *w, double xy[2], double *yaw) {
   const int j = m->body_jntadr[mj_name2id(m, mjOBJ_BODY, "object")];
   const double *q = d->qpos + m->jnt_qposadr[j];
   xy[0] = q[0], xy[1] = q[1];
-  *yaw = atan2(2 * (q[3] * q[6] + q[4] * q[5]), 1 - 2 * (q[5] * q[5] + q[6] * q[6]));
+  *yaw = nd_quat_yaw(q + 3);
 }
 
 /* The segment duration, from T up in steps of 10 %, at which M chained segments from rest
@@ -161,7 +163,7 @@ static int world_pushes(const nds_world_cfg *base, const double *keys, int n, in
     const double T = Ts[i];
     nds_world_cfg c = *base;
     c.obj[0] = c.obj[1] = c.obj[2] = 0.0;
-    c.ee[0] = -0.08, c.ee[1] = 0.0;
+    c.ee[0] = push_ee[0], c.ee[1] = push_ee[1];
     nds_world *w = nds_world_create(&c, err, errlen);
     if (!w) return -1;
     nd_snap_seg seg[ND_MAX_KEYS];
@@ -372,8 +374,7 @@ int main(int argc, char **argv) {
     static double step_us[2][NLAB * 4000], track[2][NLAB * 4000];
     static double truth[2][NLAB][3];
     double Ts[NLAB];
-    const double start[2] = {-0.08, 0.0};
-    for (int i = 0; i < NLAB; i++) Ts[i] = push_stretch(start, keys + 8 * i, M, T, 0.45, 1.8);
+    for (int i = 0; i < NLAB; i++) Ts[i] = push_stretch(push_ee, keys + 8 * i, M, T, 0.45, 1.8);
     world_figs wf[2] = {{step_us[0], track[0], 0, 0, 0}, {step_us[1], track[1], 0, 0, 0}};
     nds_world_cfg wcfg[2];
     nds_world_cfg_default(&wcfg[0]);

@@ -19,6 +19,7 @@
 #include "nd_exec.h"
 #include "nd_parse.h"
 #include "nd_rbuf.h"
+#include "nd_stats.h"
 #include "ndp.h"
 #include "nd_history.h"
 #include "ndp_validate.h"
@@ -539,15 +540,6 @@ static void noise_visit(const lcm_eventlog_event_t *ev, void *user) {
   a->count++;
 }
 
-static int cmp_double(const void *x, const void *y) {
-  const double a = *(const double *)x, b = *(const double *)y;
-  return (a > b) - (a < b);
-}
-
-static double pct(const double *sorted, int64_t n, double p) {
-  return n ? sorted[(int64_t)floor(p * (double)(n - 1) + 0.5)] : 0.0;
-}
-
 static int cmd_mocap_noise(const lc_opts *o) {
   static noise_acc a;
   memset(&a, 0, sizeof a);
@@ -559,8 +551,7 @@ static int cmd_mocap_noise(const lc_opts *o) {
     fail("%lld MOCAP frames: too few for noise figures", (long long)a.count);
     return 0;
   }
-  const int64_t n = a.count < MAX_SAMPLES ? a.count : MAX_SAMPLES;
-  qsort(age, (size_t)n, sizeof age[0], cmp_double);
+  const int n = (int)(a.count < MAX_SAMPLES ? a.count : MAX_SAMPLES);
   const double span = a.t_last - a.t_first;
   printf("mocap_frames %lld count\n", (long long)a.count);
   printf("mocap_rate %.1f Hz\n", span > 0 ? (double)(a.last_seq - a.first_seq) / span : 0.0);
@@ -572,7 +563,8 @@ static int cmd_mocap_noise(const lc_opts *o) {
          msum_std(&a.rot[2]));
   printf("mocap_obj_pos_mean %.5f %.5f %.5f m\n", msum_mean(&a.pos[0]), msum_mean(&a.pos[1]),
          msum_mean(&a.pos[2]));
-  printf("mocap_age_p50 %.3f ms\nmocap_age_p99 %.3f ms\n", pct(age, n, 0.5), pct(age, n, 0.99));
+  printf("mocap_age_p50 %.3f ms\nmocap_age_p99 %.3f ms\n", nd_quantile(age, n, 0.5),
+         nd_quantile(age, n, 0.99));
   const double due = (double)(a.last_seq - a.first_seq + 1);
   printf("mocap_lost_share %.4f of_frames\n", due > 0 ? (double)a.missing / due : 0.0);
   printf("mocap_lost_burst_mean %.2f frames\n", a.gaps ? (double)a.missing / (double)a.gaps : 0.0);
