@@ -461,3 +461,63 @@ int nd_exec_step(nd_exec *ex, const nd_exec_cfg *cfg, double now, int stale,
   ex->t_last = t;
   return ex->mode;
 }
+
+/* ---- the future, for receivers ------------------------------------------------------- */
+
+void nd_exec_future_get(const nd_exec *ex, nd_exec_future *f) {
+  double end[2][4];
+  if (ex->mode == ND_EXEC_HOLD) {
+    f->t_seg_end = f->t_brake = f->t_rest = ex->t_last;
+    for (int ax = 0; ax < 2; ax++) f->key[ax] = f->hold[ax] = ex->hold[ax], f->key[2 + ax] = 0.0;
+    return;
+  }
+  f->t_seg_end = ex->t_seg + ex->seg.T;
+  nd_snap_seg_eval(&ex->seg, ex->seg.T, end);
+  for (int ax = 0; ax < 2; ax++) f->key[ax] = end[ax][ND_P], f->key[2 + ax] = end[ax][ND_V];
+  f->t_brake = ex->t_brake;
+  f->t_rest = ex->t_brake + ex->brake.T;
+  f->hold[0] = ex->hold[0];
+  f->hold[1] = ex->hold[1];
+}
+
+/* Rebuild the piece that runs from state s at t to (p1, v1, 0, 0) at t_end, into s at t1
+ * <= t_end; a piece with less than ND_EXEC_REBUILD_MIN left is taken as ended. */
+static void rebuild(double s[2][4], double t, const double p1[2], const double v1[2],
+                    double t_end, double t1) {
+  if (t_end - t < ND_EXEC_REBUILD_MIN) {
+    for (int ax = 0; ax < 2; ax++) s[ax][ND_P] = p1[ax], s[ax][ND_V] = v1[ax];
+    for (int ax = 0; ax < 2; ax++) s[ax][ND_A] = s[ax][ND_J] = 0.0;
+    /* From an ended piece the state moves on at its end velocity, as the executor's
+     * segment evaluation does past its end (v1 is zero for a brake). */
+    for (int ax = 0; ax < 2; ax++) s[ax][ND_P] += v1[ax] * (t1 - t_end);
+    return;
+  }
+  nd_snap_seg seg;
+  nd_snap_seg_make(&seg, (const double(*)[4])s, p1, v1, t_end - t);
+  nd_snap_seg_eval(&seg, t1 - t, s);
+}
+
+void nd_exec_future_eval(const double sp[2][4], double t, const nd_exec_future *f, double t1,
+                         double out[2][4]) {
+  static const double zero[2] = {0.0, 0.0};
+  double s[2][4];
+  memcpy(s, sp, sizeof(s));
+  if (t1 < t) t1 = t;
+  if (t < f->t_brake) {
+    /* On the tracking segment: to its end, or to the brake's departure if sooner. */
+    const double te = fmin(f->t_brake, t1);
+    rebuild(s, t, f->key, f->key + 2, f->t_seg_end, te);
+    t = te;
+  }
+  if (t1 > t && t < f->t_rest) {
+    const double te = fmin(f->t_rest, t1);
+    rebuild(s, t, f->hold, zero, f->t_rest, te);
+    t = te;
+  }
+  if (t1 > t) {
+    for (int ax = 0; ax < 2; ax++) s[ax][ND_P] = f->hold[ax];
+    for (int ax = 0; ax < 2; ax++) s[ax][ND_V] = s[ax][ND_A] = s[ax][ND_J] = 0.0;
+  }
+  memcpy(out, s, sizeof(s));
+}
+

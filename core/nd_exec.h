@@ -132,6 +132,32 @@ int nd_exec_step(nd_exec *ex, const nd_exec_cfg *cfg, double now, int stale,
 /* State of the committed trajectory at time t >= ex->t_last, without changing ex. */
 void nd_exec_eval(const nd_exec *ex, double t, double out[2][4]);
 
+/* What the executor will command if no plan comes: the tracking segment ends at key at
+ * t_seg_end, the brake departs at t_brake and rests at hold at t_rest, the hold follows.
+ * Every piece is a min-snap segment that ends with a = j = 0, so a receiver that knows
+ * one setpoint (p, v, a, j) and these ends rebuilds the rest exactly: the 7th-degree
+ * polynomial through four conditions at each end is unique (nd_exec_future_eval). */
+typedef struct {
+  double t_seg_end;    /* end of the tracking segment (<= t_brake unless braking early) */
+  double key[4];       /* its end state (x, y, vx, vy) */
+  double t_brake;      /* departure of the brake */
+  double t_rest;       /* its end: at rest from here */
+  double hold[2];      /* rest position */
+} nd_exec_future;
+
+/* The committed trajectory's future, on ex's clock. */
+void nd_exec_future_get(const nd_exec *ex, nd_exec_future *f);
+
+/* The setpoint out[axis][p, v, a, j] at time t1 >= t of the trajectory whose setpoint at t
+ * is sp and whose future is f (the same clock). Exact to rounding wherever a piece has
+ * more than ND_EXEC_REBUILD_MIN left at t; a piece ending sooner is taken as ended. */
+void nd_exec_future_eval(const double sp[2][4], double t, const nd_exec_future *f, double t1,
+                         double out[2][4]);
+
+/* Shortest piece remainder rebuilt from a setpoint, s: the polynomial through conditions
+ * this close together magnifies rounding by 1/T^7. */
+#define ND_EXEC_REBUILD_MIN 1e-3
+
 /* Bounds over [0, seg->T] of speed, |acceleration| and |jerk| (max[0..2]) from n
  * samples plus a rigorous bound on the excursion between them. */
 void nd_exec_seg_bounds(const nd_snap_seg *seg, int n, double max[3]);

@@ -162,6 +162,12 @@ const nds_planner_cfg *nds_planner_config(const nds_planner *p) { return &p->cfg
 
 void nds_planner_reset(nds_planner *p) { p->warm = 0; }
 
+int nds_planner_predict(nds_planner *p, const nds_state *s, const double (*sp)[2][4], int n,
+                        nds_state *s1, char *err, int errlen) {
+  return nds_predict(nds_batch_model(p->batch, 0), nds_batch_data(p->batch, 0), &p->cfg.ctrl,
+                     s, sp, n, s1, err, errlen);
+}
+
 int nds_planner_plan(nds_planner *p, const nds_state *s, const double sp0[2][4],
                      const nd_goal *goal, nds_plan *out, char *err, int errlen) {
   const nds_planner_cfg *c = &p->cfg;

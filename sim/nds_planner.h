@@ -65,4 +65,10 @@ void nds_planner_reset(nds_planner *p);
 int nds_planner_plan(nds_planner *p, const nds_state *s, const double sp0[2][4],
                      const nd_goal *goal, nds_plan *out, char *err, int errlen);
 
+/* The state n model steps after s while the sphere tracks setpoints sp[0..n-1], one per
+ * step (nds_predict with the planner's model and theta): where a plan that starts then
+ * starts. Not concurrent with nds_planner_plan. Return 0, or -1 with a message. */
+int nds_planner_predict(nds_planner *p, const nds_state *s, const double (*sp)[2][4], int n,
+                        nds_state *s1, char *err, int errlen);
+
 #endif

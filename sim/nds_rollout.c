@@ -51,6 +51,26 @@ static int free_to_fly(const nds_model *nm, const mjData *d, int stepped, const 
   return dist > reach + 2.0 * dt * hypot(vel[0], vel[1]);
 }
 
+/* The sphere's position and velocity in d; off is its body offset from its joints' zero. */
+static void ee_read(const nds_model *nm, const mjData *d, const double off[2], double pos[2],
+                    double vel[2]) {
+  for (int k = 0; k < 2; k++) {
+    pos[k] = d->qpos[nm->ee_qpos[k]] + off[k];
+    vel[k] = d->qvel[nm->ee_dof[k]];
+  }
+}
+
+static void ee_offset(const nds_model *nm, double off[2]) {
+  for (int k = 0; k < 2; k++)
+    off[k] = nm->m->body_pos[3 * nm->ee_body + k] - nm->m->qpos0[nm->ee_qpos[k]];
+}
+
+static int warned(const mjData *d) {
+  for (int w = 0; w < mjNWARNING; w++)
+    if (d->warning[w].number != WARN_START) return 1;
+  return 0;
+}
+
 void nds_rollout(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
                  const nds_state *s0, const double sp0[2][4], const double *keys, int M,
                  double T, nds_rollout_out *out) {
@@ -88,8 +108,7 @@ void nds_rollout_ff(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
   nds_ctrl_reset(&c);
   double acc_sum = 0, v2_peak = 0, a2_peak = 0;
   double off[2], pos[2], vel[2], f[2];
-  for (int k = 0; k < 2; k++)
-    off[k] = m->body_pos[3 * nm->ee_body + k] - m->qpos0[nm->ee_qpos[k]];
+  ee_offset(nm, off);
 
   /* The sphere's two slide dofs move its mass alone (nds_model checks: a leaf body, no
    * armature); without damping MuJoCo's Euler step for them is v += dt f / m. */
@@ -115,10 +134,7 @@ void nds_rollout_ff(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
     if (v2 > v2_peak) v2_peak = v2;
     if (a2 > a2_peak) a2_peak = a2;
 
-    for (int k = 0; k < 2; k++) {
-      pos[k] = d->qpos[nm->ee_qpos[k]] + off[k];
-      vel[k] = d->qvel[nm->ee_dof[k]];
-    }
+    ee_read(nm, d, off, pos, vel);
     nds_ctrl_pid(ctrl, &c, (const double(*)[4])s, pos, vel, dt, f);
     /* The step moves the sphere by dt times its velocity after the step. */
     const double vnext[2] = {vel[0] + dt * f[0] * inv_m, vel[1] + dt * f[1] * inv_m};
@@ -134,9 +150,7 @@ void nds_rollout_ff(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
     d->qfrc_applied[nm->ee_dof[0]] = f[0];
     d->qfrc_applied[nm->ee_dof[1]] = f[1];
     mj_step(m, d);
-
-    for (int w = 0; w < mjNWARNING; w++)
-      if (d->warning[w].number != WARN_START) diverged = 1;
+    diverged = warned(d);
   }
   if (!diverged && !(nd_all_finite(d->qpos, m->nq) && nd_all_finite(d->qvel, m->nv)))
     diverged = 1;
@@ -158,6 +172,34 @@ void nds_rollout_ff(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
   out->diverged = 0;
   out->steps = (int)nsteps;
   out->skipped = (int)skipped;
+}
+
+int nds_predict(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl, const nds_state *s0,
+                const double (*sp)[2][4], int n, nds_state *s1, char *err, int errlen) {
+  const mjModel *m = nm->m;
+  if (n < 0 || (n > 0 && !nd_all_finite(&sp[0][0][0], 8 * n))) {
+    snprintf(err, errlen, "predict: %d setpoints, or one not finite", n);
+    return -1;
+  }
+  if (nds_state_set(nm, d, s0, err, errlen)) return -1;
+  for (int i = 0; i < mjNWARNING; i++) d->warning[i].number = WARN_START;
+  nds_ctrl c;
+  nds_ctrl_reset(&c);
+  double off[2], pos[2], vel[2], f[2];
+  ee_offset(nm, off);
+  for (int i = 0; i < n; i++) {
+    ee_read(nm, d, off, pos, vel);
+    nds_ctrl_pid(ctrl, &c, sp[i], pos, vel, m->opt.timestep, f);
+    d->qfrc_applied[nm->ee_dof[0]] = f[0];
+    d->qfrc_applied[nm->ee_dof[1]] = f[1];
+    mj_step(m, d);
+    if (warned(d) || !nd_all_finite(d->qpos, m->nq) || !nd_all_finite(d->qvel, m->nv)) {
+      snprintf(err, errlen, "predict: the model diverged at step %d of %d", i + 1, n);
+      return -1;
+    }
+  }
+  nds_state_get(nm, d, s1);
+  return 0;
 }
 
 /* ---- batches on the pool ---- */

@@ -42,6 +42,13 @@ void nds_rollout_ff(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
                     const nds_state *s0, const double sp0[2][4], const double *keys, int M,
                     double T, int free_flight, nds_rollout_out *out);
 
+/* Advance s0 by n steps of nm with the sphere tracking setpoint sp[i] through step i, as a
+ * rollout does, into s1: the state n steps ahead if the executor's trajectory sp is
+ * followed. Return 0, or -1 with a message (non-finite input, divergence). d is scratch.
+ * Allocates nothing. */
+int nds_predict(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl, const nds_state *s0,
+                const double (*sp)[2][4], int n, nds_state *s1, char *err, int errlen);
+
 /* Per-worker MuJoCo copies for parallel rollouts: each worker owns an nds_model copy
  * (so theta can differ per task) and one mjData, allocated once. */
 typedef struct nds_batch nds_batch;

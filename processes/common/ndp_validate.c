@@ -76,11 +76,34 @@ int ndp_check_ee_cmd(const nudge_ee_cmd_t *m, char *why, int len) {
     snprintf(why, len, "plan_utime = %lld is negative", (long long)m->plan_utime);
     return -1;
   }
+  if (vec_ok(m->seg_key, 2, NDP_MAX_POS, "seg_key position", why, len) ||
+      vec_ok(m->seg_key + 2, 2, NDP_MAX_VEL, "seg_key velocity", why, len) ||
+      vec_ok(m->hold, 2, NDP_MAX_POS, "hold", why, len))
+    return -1;
+  /* The pieces follow one another; a future more than a minute away is no executor's. */
+  const int64_t t[3] = {m->seg_end_utime, m->brake_utime, m->rest_utime};
+  static const char *name[3] = {"seg_end_utime", "brake_utime", "rest_utime"};
+  for (int k = 0; k < 3; k++)
+    if (t[k] <= 0 || t[k] > m->utime + 60000000) {
+      snprintf(why, len, "%s = %lld is not within a minute of utime %lld", name[k],
+               (long long)t[k], (long long)m->utime);
+      return -1;
+    }
+  if (m->rest_utime < m->brake_utime) {
+    snprintf(why, len, "rest_utime %lld is before brake_utime %lld", (long long)m->rest_utime,
+             (long long)m->brake_utime);
+    return -1;
+  }
   return 0;
 }
 
 int ndp_check_plan(const nudge_plan_t *m, char *why, int len) {
   if (utime_ok(m->utime, why, len) || utime_ok(m->state_utime, why, len)) return -1;
+  if (m->start_utime < 0) {
+    snprintf(why, len, "start_utime = %lld is negative", (long long)m->start_utime);
+    return -1;
+  }
+  if (vec_ok(m->start_p, 2, NDP_MAX_POS, "start_p", why, len)) return -1;
   if (m->M < 1 || m->M > NUDGE_PLAN_T_MAX_KEYPOINTS) {
     snprintf(why, len, "M = %d is outside [1, %d]", m->M, NUDGE_PLAN_T_MAX_KEYPOINTS);
     return -1;

@@ -2,6 +2,7 @@
 #include "exec_io.h"
 
 #include <stdio.h>
+#include <math.h>
 #include <string.h>
 
 #include "ndp_validate.h"
@@ -35,27 +36,37 @@ static void use_plan(void *user, const nudge_plan_t *msg) {
   in.t_arrive = ndp_sent_mono(msg->utime);
   in.plan_id = msg->plan_id;
   in.utime = msg->utime;
+  memcpy(in.start_p, msg->start_p, sizeof in.start_p);
   in.M = msg->M;  /* 1..ND_MAX_KEYS: ndp_check_plan */
   memcpy(in.keys, msg->keypoints, sizeof in.keys);
-  /* The planner's rollouts reach keypoint 0 at state_utime + T. The plan arrives a planning
-   * time later, so the segment is shortened by that age to keep the keypoint where the
-   * planner put it in time; otherwise every plan would push the target further out and a
-   * robot re-planned at 10-20 Hz would creep. Wall clocks of two hosts need to be synced
-   * for this (same host here); the clamp to T/2 bounds the harm of a skewed clock. */
-  double age = 1e-6 * (double)(ndp_utime() - msg->state_utime);
-  if (!(age > 0.0)) age = 0.0;
+  /* Keypoint 0 is due T after the segment's start: start_utime when the plan names one
+   * (its rollouts began there), else state_utime. A plan that arrives after that start
+   * has its segment shortened by the delay, so the keypoint stays where the planner put it
+   * in time; otherwise every plan would push the target further out and a robot
+   * re-planned at 10-20 Hz would creep. Wall clocks of two hosts need to be synced for
+   * this (same host here); the clamp to T/2 bounds the harm of a skewed clock. */
+  const int64_t now_utime = ndp_utime();
+  const int64_t start = msg->start_utime ? msg->start_utime : msg->state_utime;
+  double late = 1e-6 * (double)(now_utime - start);
   /* A plan whose first keypoint was due before it arrived was made from a state the robot
    * has left (a planner stalled mid-plan, or one that planned on input it handled late):
-   * even shortened, following it would move on stale information. */
-  if (age > msg->T) {
-    snprintf(why, sizeof why,
-             "plan %lld started from a state %.0f ms old, older than its segment (%.0f ms)",
-             (long long)msg->plan_id, 1e3 * age, 1e3 * msg->T);
+   * even shortened, following it would move on stale information. One that starts later
+   * than its own segment would last is not a plan for now. */
+  if (late > msg->T || -late > msg->T) {
+    snprintf(why, sizeof why, "plan %lld %s %.0f ms %s, more than its segment (%.0f ms)",
+             (long long)msg->plan_id, late > 0 ? "is due from" : "starts", 1e3 * fabs(late),
+             late > 0 ? "ago" : "ahead", 1e3 * msg->T);
     ndp_refused(&c->log_old, PROG, "PLAN", why);
     return;
   }
-  if (age > 0.5 * msg->T) age = 0.5 * msg->T;
-  in.T = msg->T - age;
+  in.t_start = in.t_arrive;
+  if (late < 0.0) {
+    /* Early: the segment starts at start_utime, on the executor's monotonic clock. */
+    in.t_start = ndp_mono() - late;
+    late = 0.0;
+  }
+  if (late > 0.5 * msg->T) late = 0.5 * msg->T;
+  in.T = msg->T - late;
   nd_mailbox_post(&c->x->plan, &in, (int)sizeof(in));
 }
 

@@ -71,7 +71,7 @@ int exec_loop_cycle(exec_loop *s, double now, int64_t utime) {
   const int state_stale = now - s->t_state > timeout;
   /* A plan waits while the state is stale (it would be dropped again at once) and is
    * applied when the state returns, if it is still fresh itself. */
-  if (s->pending && !state_stale && !s->stopped) {
+  if (s->pending && !state_stale && !s->stopped && now >= s->plan.t_start) {
     s->pending = 0;
     if (now - s->plan.t_arrive <= s->plan_timeout) {
       /* Restarting the segment for a re-sent keypoint would postpone it by a re-planning
@@ -93,6 +93,11 @@ int exec_loop_cycle(exec_loop *s, double now, int64_t utime) {
         rc = nd_exec_plan(&s->ex, &s->cfg, now, key, s->plan.T, s->rep.refused_why,
                           (int)sizeof(s->rep.refused_why));
       if (rc == ND_EXEC_OK) {
+        double cur[2][4];
+        nd_exec_eval(&s->ex, now, cur);
+        const double e = hypot(cur[0][ND_P] - s->plan.start_p[0], cur[1][ND_P] - s->plan.start_p[1]);
+        s->rep.start_err_sum += e;
+        if (e > s->rep.start_err_max) s->rep.start_err_max = e;
         s->have_plan = 1;
         s->t_plan = s->plan.t_arrive;
         s->rep.plan_id = s->plan.plan_id;
@@ -141,7 +146,15 @@ int exec_loop_cycle(exec_loop *s, double now, int64_t utime) {
     m.j[ax] = sp[ax][ND_J];
   }
   m.p[2] = s->z;
-  m.v[2] = m.a[2] = 0.0;
+  m.v[2] = m.a[2] = m.j[2] = 0.0;
+  /* The future on the wall clock of utime: now is utime. */
+  nd_exec_future f;
+  nd_exec_future_get(&s->ex, &f);
+  m.seg_end_utime = utime + (int64_t)llround(1e6 * (f.t_seg_end - now));
+  m.brake_utime = utime + (int64_t)llround(1e6 * (f.t_brake - now));
+  m.rest_utime = utime + (int64_t)llround(1e6 * (f.t_rest - now));
+  memcpy(m.seg_key, f.key, sizeof(m.seg_key));
+  memcpy(m.hold, f.hold, sizeof(m.hold));
 
   int ret = -1;
   unsigned char *slot = nd_ring_reserve(&s->io->ring);

@@ -40,6 +40,8 @@ typedef struct {
 typedef struct {
   double t_arrive;     /* as exec_loop_state_in's */
   int64_t plan_id;
+  double t_start;      /* ndp_mono() at which its segment starts (<= t_arrive: at once) */
+  double start_p[2];   /* setpoint position the planner's rollouts started from, m */
   int64_t utime;       /* plan_t.utime, passed on in EE_CMD.plan_utime */
   int M;               /* keypoints used, 1..ND_MAX_KEYS (clamped if not) */
   double keys[ND_MAX_KEYS][4];  /* (x, y, vx, vy) */
@@ -60,6 +62,9 @@ typedef struct {
   int64_t accepted, refused;/* plans taken / refused by nd_exec (limits or workspace) */
   int64_t refused_box;      /* of the refused: a keypoint or trajectory outside the workspace */
   int64_t kept;             /* of the accepted: re-sent keypoints, their segment kept */
+  double start_err_sum, start_err_max; /* m: the setpoint's distance from start_p when a
+                                        * plan's segment starts (the latency the planner
+                                        * did not foresee), over the accepted */
   int64_t late;             /* plans already stale when the loop took them: dropped */
   int64_t refused_id;       /* plan_id of the last refused plan */
   int refused_rc;           /* its ND_EXEC_* code (ND_EXEC_EBOX: the workspace) */
@@ -117,7 +122,8 @@ void exec_loop_init(exec_loop *s, const nd_exec_cfg *cfg, double timeout, double
  * apply a new plan, step the executor, commit the setpoint for that instant to the ring.
  * A plan with any keypoint outside cfg's workspace is refused like one nd_exec_plan
  * refuses (counted, the running trajectory unchanged, the plan clock not renewed).
- * A new plan starts a new segment from the current setpoint, except one that re-sends
+ * A new plan starts a new segment from the setpoint at its t_start (waiting for it, the
+ * running segment goes on; a newer plan replaces a waiting one), except one that re-sends
  * the keypoint the running segment is heading for (ND_EXEC_SAME_KEY): that segment
  * goes on, so the keypoint stays due when it was first due.
  * Returns 1 if a setpoint was committed, 0 before the first robot state, -1 if the ring

@@ -127,11 +127,13 @@ int main(int argc, char **argv) {
                "us, max %d us; %lld overruns (%lld deadlines skipped); %llu ring drops; "
                "max publish backlog %d; plans %lld taken (%lld re-sent the keypoint being "
                "tracked), %lld refused (%lld for the workspace), %lld stale on arrival, %lld "
-               "from an outdated state\n",
+               "from an outdated state; setpoint off the plan's start by %.1f mm mean, %.1f mm "
+               "max\n",
           (long long)r->cycles, (long long)r->sent, ls.p50_us, ls.p99_us, ls.max_us,
           (long long)ls.overruns, (long long)ls.skipped, (unsigned long long)drops_seen,
           io.backlog_max, (long long)r->accepted, (long long)r->kept, (long long)r->refused,
-          (long long)r->refused_box, (long long)r->late, (long long)io.log_old.count);
+          (long long)r->refused_box, (long long)r->late, (long long)io.log_old.count,
+          r->accepted ? 1e3 * r->start_err_sum / r->accepted : 0.0, 1e3 * r->start_err_max);
   close(rt.bell);
   lcm_destroy(lcm);
   return code;

@@ -9,7 +9,8 @@
 
 int main(int argc, char **argv) {
   planner_opts o = {.threads = ndp_default_threads(), .pop = 50, .iters = 2, .seed = 1,
-                    .max_rate = 20.0, .state_timeout = 0.1};
+                    .max_rate = 20.0, .state_timeout = 0.1, .lead = 1};
+  static const char *const lead_words[] = {"off", "on", NULL};
   /* 10 ms, not the demo's 5 ms: on one core it plans at ~19 Hz while pushing, above the
    * 10 Hz the executor's 0.1 s plan timeout needs; 5 ms did not reach that. Its cost in
    * prediction error is in nudge-bench (doc/decisions.md#plan-dt). */
@@ -31,6 +32,10 @@ int main(int argc, char **argv) {
        .help = "planning model timestep (the tracking controller is stable up to 10 ms); see "
                "nudge-bench for its prediction error"},
       {"seed", ND_OPT_U64, &o.seed, .help = "planner seed"},
+      {"lead", ND_OPT_CHOICE, &o.lead, .choices = lead_words, .arg = "on|off", .def = "on",
+       .help = "latency compensation: plan from the state predicted for when the plan will "
+               "reach the executor (the executor's committed trajectory from EE_CMD), and "
+               "have it start then; off plans from the newest measurement, started on arrival"},
       {"max-rate", ND_OPT_DOUBLE, &o.max_rate, 0.1, 1000, .arg = "HZ",
        .help = "at most this many plans per second"},
       {"state-timeout", ND_OPT_DOUBLE, &o.state_timeout, 1e-3, 10, .arg = "S",
@@ -94,10 +99,10 @@ int main(int argc, char **argv) {
 
   fprintf(stderr,
           PROG ": %s, iCEM N %d C %d, M %d, T %.2f s, plan dt %.4f s, %d worker(s), max %.1f "
-          "plans/s, state timeout %.3f s, theta (%g, %g, %g, %g), seed %llu, keypoints in "
+          "plans/s, lead %s, state timeout %.3f s, theta (%g, %g, %g, %g), seed %llu, keypoints in "
           "x [%g, %g] y [%g, %g] m, v_max %g m/s, a_max %g m/s^2\n",
           ndp_url(o.url), o.pop, o.iters, pc.M, pc.T, o.plan_dt, o.threads, o.max_rate,
-          o.state_timeout, o.theta[0], o.theta[1], o.theta[2], o.theta[3],
+          lead_words[o.lead], o.state_timeout, o.theta[0], o.theta[1], o.theta[2], o.theta[3],
           (unsigned long long)o.seed, pc.ws_lo[0], pc.ws_hi[0], pc.ws_lo[1], pc.ws_hi[1],
           pc.v_max, pc.a_max);
 

@@ -1,7 +1,9 @@
 /* plan: one plan from the newest inputs, published on PLAN (planner.h). */
+#include <math.h>
 #include <stdio.h>
 #include <string.h>
 
+#include "nd_exec.h"
 #include "planner.h"
 
 /* Plan from the newest inputs and publish. Return 0, or -1 with a message (LCM failure). */
@@ -28,9 +30,43 @@ int planner_plan_once(planner_proc *p, double now, char *err, int errlen) {
   }
   const nd_goal goal = {.x = p->task.goal_x, .y = p->task.goal_y, .yaw = p->task.goal_yaw};
 
-  nds_plan plan;
-  char why[160];
   double t0 = ndp_mono();
+  int64_t start_utime = 0;
+  char why[160];
+  nds_state s1;
+  if (o->lead && cmd_ok) {
+    /* Plan from where the world will be when the plan starts: the object and sphere from
+     * the state's capture time, the sphere tracking what the executor has committed to,
+     * up to the moment the executor will have this plan. */
+    const double dt = o->plan_dt;
+    const int64_t now_utime = ndp_utime(), t_state = p->mocap.utime;
+    const double ahead = 1e-6 * (double)(now_utime - t_state) + p->plan_s * PLANNER_LEAD_GAIN +
+                         PLANNER_LEAD_MARGIN;
+    int n = (int)ceil(ahead / dt);
+    if (n < 0) n = 0;
+    if (n > PLANNER_PRE_MAX) n = PLANNER_PRE_MAX;
+    nd_exec_future f;
+    const double tc = 1e-6 * (double)(p->cmd.utime - t_state);
+    f.t_seg_end = 1e-6 * (double)(p->cmd.seg_end_utime - t_state);
+    f.t_brake = 1e-6 * (double)(p->cmd.brake_utime - t_state);
+    f.t_rest = 1e-6 * (double)(p->cmd.rest_utime - t_state);
+    memcpy(f.key, p->cmd.seg_key, sizeof(f.key));
+    memcpy(f.hold, p->cmd.hold, sizeof(f.hold));
+    /* Times on the state's clock (0 = its capture); before the command's, its setpoint. */
+    for (int i = 0; i < n; i++)
+      nd_exec_future_eval((const double(*)[4])sp0, tc, &f, i * dt, p->pre_sp[i]);
+    nd_exec_future_eval((const double(*)[4])sp0, tc, &f, n * dt, sp0);
+    if (nds_planner_predict(p->planner, &s, (const double(*)[2][4])p->pre_sp, n, &s1, why,
+                            sizeof(why))) {
+      planner_reject(p, "plan input", why);
+      return 0;
+    }
+    s = s1;
+    start_utime = t_state + (int64_t)llround(1e6 * n * dt);
+    p->lead_sum += n * dt;
+  }
+
+  nds_plan plan;
   if (nds_planner_plan(p->planner, &s, (const double(*)[4])sp0, &goal, &plan, why,
                        sizeof(why))) {
     /* Inputs are validated, so this is a non-finite estimate: skip this round. */
@@ -38,6 +74,8 @@ int planner_plan_once(planner_proc *p, double now, char *err, int errlen) {
     return 0;
   }
   double ms = 1e3 * (ndp_mono() - t0);
+  /* The lead follows the plan time over the last ~5 plans. */
+  p->plan_s = p->plan_s > 0.0 ? 0.8 * p->plan_s + 0.2e-3 * ms : 1e-3 * ms;
 
   nudge_plan_t m;
   memset(&m, 0, sizeof(m));
@@ -45,6 +83,9 @@ int planner_plan_once(planner_proc *p, double now, char *err, int errlen) {
   m.plan_id = ++p->plan_id;
   m.task_id = p->task.task_id;
   m.state_utime = p->mocap.utime;
+  m.start_utime = start_utime;
+  m.start_p[0] = sp0[0][0];
+  m.start_p[1] = sp0[1][0];
   m.M = (int8_t)plan.M;
   for (int k = 0; k < plan.M && k < NUDGE_PLAN_T_MAX_KEYPOINTS; k++)
     memcpy(m.keypoints[k], plan.keys[k], 4 * sizeof(double));

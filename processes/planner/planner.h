@@ -29,7 +29,17 @@ typedef struct {
   double state_timeout;  /* s */
   double theta[ND_NTHETA];
   nd_box ws;             /* keypoint box, m */
+  int lead;              /* 1: plans start when they reach the executor (PLANNER_LEAD_*) */
 } planner_opts;
+
+/* Latency compensation: a plan starts lead seconds after planning begins, predicted from
+ * the state and the executor's committed trajectory (EE_CMD's future), and the executor
+ * waits for that moment. lead = the recent plan time x LEAD_GAIN + LEAD_MARGIN (s): a
+ * plan that takes longer arrives late and the executor shortens its segment, one that
+ * is quicker waits. The prefix is at most PLANNER_PRE_MAX model steps. */
+#define PLANNER_LEAD_GAIN 1.2
+#define PLANNER_LEAD_MARGIN 0.004
+#define PLANNER_PRE_MAX 256
 
 /* The process's mutable state, owned by the main thread (LCM handlers run inside
  * lcm_handle on it, never during a plan). */
@@ -60,6 +70,9 @@ typedef struct {
   double task_ms_sum, task_ms_max;
   double task_stale;           /* s of the task spent without fresh state */
 
+  double plan_s;               /* recent plan time, s (moving average) */
+  double pre_sp[PLANNER_PRE_MAX][2][4]; /* the prefix's setpoints, one per model step */
+  double lead_sum;             /* s of prediction over the task's plans */
   int64_t theta_version;       /* params_t.version in use; -1 = --theta */
   int64_t plan_id;
   ndp_ratelog rejected;        /* rate-limited log of refused inputs */

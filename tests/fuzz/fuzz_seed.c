@@ -158,7 +158,10 @@ static void seed_msgs(void) {
                             .ee_vel = {0.1, 0, 0}, .ee_force = {2, 0, 0}, .mode = 0};
   SEED_MSG(robot_state_t, rs);
   nudge_ee_cmd_t ec = {.utime = t, .seq = 9, .plan_id = 3, .plan_utime = t - 500,
-                       .mode = 0, .p = {-0.05, 0, 0.02}, .v = {0.1, 0, 0}, .a = {0.5, 0, 0}};
+                       .mode = 0, .p = {-0.05, 0, 0.02}, .v = {0.1, 0, 0}, .a = {0.5, 0, 0},
+                       .seg_end_utime = t + 200000, .seg_key = {0.0, 0.0, 0.2, 0.0},
+                       .brake_utime = t + 200000, .rest_utime = t + 300000,
+                       .hold = {0.02, 0.0}};
   SEED_MSG(ee_cmd_t, ec);
   nudge_plan_t pl = {.utime = t, .plan_id = 3, .task_id = 1, .state_utime = t - 1000,
                      .M = 2, .keypoints = {{0.0, 0.01, 0.2, 0.0}, {0.05, 0.02, 0.1, 0.0}},

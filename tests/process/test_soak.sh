@@ -23,8 +23,9 @@
 #   2. the adapter's parameter history reads back entry by entry: no corrupt entry,
 #      versions +1 each, fitted on this buffer and never on more rollouts than it holds;
 #   3. no EE_CMD setpoint in mode TRACKING follows a plan older than the executor's plan
-#      timeout (EE_CMD.plan_utime), nor a plan made from a state older than the plan's
-#      segment T plus that timeout (nudge-logcheck stale-cmds);
+#      timeout (EE_CMD.plan_utime), nor a plan made from a state (or, for a plan that
+#      names one, a start) older than the plan's segment T plus that timeout
+#      (nudge-logcheck stale-cmds);
 #   4. every killed process was restarted, its new instance's first heartbeat on STATUS
 #      within 2 s of the kill (the runner's restart is the test's, reported apart), and
 #      no process exited that was not killed;

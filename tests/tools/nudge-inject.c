@@ -220,7 +220,9 @@ static void inject_robot_state(inj *j) {
 static void inject_ee_cmd(inj *j) {
   const int64_t now = wall_us();
   const nudge_ee_cmd_t ok = {.utime = now, .seq = 1, .plan_id = 1, .plan_utime = now - 1000,
-                             .mode = 0, .p = {-0.1, 0, 0.05}};
+                             .mode = 0, .p = {-0.1, 0, 0.05}, .seg_end_utime = now,
+                             .seg_key = {-0.1, 0, 0, 0}, .brake_utime = now,
+                             .rest_utime = now, .hold = {-0.1, 0}};
   nudge_ee_cmd_t m;
 #define CMD_BAD(stmt)                                                   \
   do {                                                                  \
@@ -241,6 +243,12 @@ static void inject_ee_cmd(inj *j) {
   CMD_BAD(m.mode = 7);
   CMD_BAD(m.mode = -1);
   CMD_BAD(m.plan_utime = -1);
+  CMD_BAD(m.seg_key[0] = NAN);
+  CMD_BAD(m.seg_key[3] = 1e4);
+  CMD_BAD(m.hold[1] = INFINITY);
+  CMD_BAD(m.seg_end_utime = 0);
+  CMD_BAD(m.rest_utime = now + 3600000000LL);
+  CMD_BAD(m.brake_utime = now + 1000);
 #undef CMD_BAD
   if (j->o->workspace) {
     m = ok;
@@ -284,6 +292,7 @@ static void inject_plan(inj *j) {
   PLAN_BAD(m.keypoints[0][3] = -1e3);
   PLAN_BAD(m.utime = 0);
   PLAN_BAD(m.state_utime = -1);
+  PLAN_BAD(m.start_utime = -5);
 #undef PLAN_BAD
   if (j->o->plan_to) {
     m = ok;

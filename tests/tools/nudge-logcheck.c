@@ -721,7 +721,7 @@ static int cmd_live(const lc_opts *o) {
 /* ---- stale-cmds: did any setpoint move on a stale plan? ----------------------------- */
 
 typedef struct {
-  int64_t utime, state_utime;
+  int64_t utime, state_utime;  /* state_utime: the plan's start_utime if it has one */
   double T;
 } plan_ref;
 
@@ -748,7 +748,8 @@ static void plans_visit(const lcm_eventlog_event_t *ev, void *user) {
     s->cap = cap;
   }
   s->p[s->n].utime = m.utime;
-  s->p[s->n].state_utime = m.state_utime;
+  /* A plan that names its start was predicted to it from its state. */
+  s->p[s->n].state_utime = m.start_utime ? m.start_utime : m.state_utime;
   s->p[s->n].T = m.T;
   s->n++;
 }
@@ -798,9 +799,10 @@ static void stale_visit(const lcm_eventlog_event_t *ev, void *user) {
     if (!a->first_stale_utime) a->first_stale_utime = m.utime;
   }
   if (a->ref) {
-    /* The executor refuses a plan whose state is older than its segment T on arrival and
-     * follows it for the timeout at most: older than that, it moved on a state it had
-     * left (a planner that stalled mid-plan, or planned on input it handled late). */
+    /* The executor refuses a plan whose state (or start, when it names one) is older than
+     * its segment T on arrival and follows it for the timeout at most: older than that, it
+     * moved on a state it had left (a planner that stalled mid-plan, or planned on input
+     * it handled late). */
     const double st_ms = 1e-3 * (double)(m.utime - a->ref->state_utime);
     if (st_ms > a->state_age_max_ms) a->state_age_max_ms = st_ms;
     if (st_ms > 1e3 * (a->ref->T + a->o->timeout) + a->o->slack_ms) a->stale_state++;

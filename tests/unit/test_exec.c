@@ -610,6 +610,70 @@ static void test_heading_to(void **state) {
   assert_false(nd_exec_heading_to(&ex, 1.05, far, 1e-6));
 }
 
+/* What a receiver rebuilds from one setpoint and the future (nd_exec_future_eval) is
+ * what the executor then commands: along the segment, through an early or planned brake
+ * and into the hold, from any point on the way. */
+static void check_future(const nd_exec *ex, double t) {
+  nd_exec_future f;
+  nd_exec_future_get(ex, &f);
+  double sp[2][4], want[2][4], got[2][4];
+  nd_exec_eval(ex, t, sp);
+  for (double t1 = t; t1 < f.t_rest + 0.1; t1 += 0.0137) {
+    nd_exec_eval(ex, t1, want);
+    nd_exec_future_eval((const double(*)[4])sp, t, &f, t1, got);
+    for (int ax = 0; ax < 2; ax++)
+      for (int k = 0; k < 4; k++)
+        if (!(fabs(got[ax][k] - want[ax][k]) <= 1e-7 * (1.0 + fabs(want[ax][k]))))
+          fail_msg("rebuilt from t %.4f (mode %d, seg end %.4f, brake %.4f, rest %.4f): at t "
+                   "%.4f axis %d derivative %d is %.12g, the executor commands %.12g", t,
+                   ex->mode, f.t_seg_end, f.t_brake, f.t_rest, t1, ax, k, got[ax][k],
+                   want[ax][k]);
+  }
+}
+
+static void test_future(void **state) {
+  (void)state;
+  const nd_exec_cfg cfg = wide();
+  nd_rng r;
+  nd_rng_seed(&r, 17, 3);
+  nd_exec ex;
+  const double p[2] = {0.0, 0.0};
+  char err[128];
+  double out[2][4];
+  nd_exec_init(&ex, p, 0.0);
+  check_future(&ex, 0.0);                       /* holding */
+  double now = 0.0;
+  for (int i = 0; i < 200; i++) {
+    double key[4];
+    random_key(&r, &cfg, 0.4, key);
+    if (nd_exec_plan(&ex, &cfg, now, key, 0.1 + 0.3 * nd_rng_uniform(&r), err, sizeof err))
+      continue;
+    /* A point on the segment, maybe after an early brake (stale inputs) or past the
+     * segment's end, where the planned brake runs. */
+    const double u = nd_rng_uniform(&r);
+    const double t = now + (ex.seg.T + 0.2) * nd_rng_uniform(&r);
+    if (u < 0.3) nd_exec_step(&ex, &cfg, now + (t - now) * u, 1, out);
+    nd_exec_step(&ex, &cfg, t, 0, out);
+    check_future(&ex, t);
+    now = t + 0.01;
+    nd_exec_step(&ex, &cfg, now, 0, out);
+  }
+  /* A piece with under ND_EXEC_REBUILD_MIN left is taken as ended: still within a few
+   * micrometres of the executor. */
+  const double key[4] = {0.1, 0.05, 0.2, 0.0};
+  nd_exec_init(&ex, p, now);
+  assert_int_equal(nd_exec_plan(&ex, &cfg, now, key, 0.2, err, sizeof err), ND_EXEC_OK);
+  nd_exec_future f;
+  nd_exec_future_get(&ex, &f);
+  const double t = f.t_seg_end - 0.5 * ND_EXEC_REBUILD_MIN;
+  double sp[2][4], want[2][4], got[2][4];
+  nd_exec_eval(&ex, t, sp);
+  nd_exec_eval(&ex, f.t_seg_end + 0.01, want);
+  nd_exec_future_eval((const double(*)[4])sp, t, &f, f.t_seg_end + 0.01, got);
+  assert_near(got[0][ND_P], want[0][ND_P], 1e-5);
+  assert_near(got[1][ND_P], want[1][ND_P], 1e-5);
+}
+
 /* Bad plans are refused with a message and change nothing. */
 static void test_rejects(void **state) {
   (void)state;
@@ -674,6 +738,7 @@ int main(void) {
       cmocka_unit_test(test_pushing_switching),
       cmocka_unit_test(test_resume),
       cmocka_unit_test(test_heading_to),
+      cmocka_unit_test(test_future),
       cmocka_unit_test(test_workspace),
       cmocka_unit_test(test_workspace_switching),
       cmocka_unit_test(test_rejects),

@@ -368,6 +368,51 @@ static void test_free_flight_agrees(void **state) {
   assert_true(far_skipped > far_steps / 2);
 }
 
+/* nds_predict steps exactly as a rollout does: given the setpoints of a rollout's pushing
+ * segment, step by step, it ends in the rollout's state, bit for bit; zero steps leave the
+ * state as it was; a non-finite setpoint is refused. */
+static void test_predict(void **state) {
+  (void)state;
+  nds_model nm;
+  nds_test_build(&nm, 0.005, NULL);
+  mjData *d = mj_makeData(nm.m);
+  nds_ctrl_cfg ctrl;
+  nds_ctrl_cfg_default(&ctrl);
+  nds_state s0, s1, sr;
+  const double ee[2] = {-0.08, 0.01};
+  nds_state_rest(&nm, 0, 0, 0.1, ee, &s0);
+  double sp0[2][4];
+  sp_at(ee[0], ee[1], sp0);
+  const double key[4] = {0.06, 0.02, 0.1, 0.0}, T = 0.4;
+  nds_rollout_out o;
+  nds_rollout(&nm, d, &ctrl, &s0, (const double(*)[4])sp0, key, 1, T, &o);
+  assert_false(o.diverged);
+  assert_true(o.obj_xy[0] > 0.03);  /* it pushed */
+  nds_state_get(&nm, d, &sr);
+
+  enum { N = 80 };  /* T / dt */
+  static double sp[N][2][4];
+  nd_snap_seg seg;
+  nd_snap_seg_make(&seg, (const double(*)[4])sp0, key, key + 2, T);
+  for (int i = 0; i < N; i++) nd_snap_seg_eval(&seg, i * 0.005, sp[i]);
+  char err[128];
+  assert_int_equal(nds_predict(&nm, d, &ctrl, &s0, (const double(*)[2][4])sp, N, &s1, err,
+                               sizeof err), 0);
+  assert_memory_equal(&s1, &sr, sizeof s1);
+
+  assert_int_equal(nds_predict(&nm, d, &ctrl, &s0, (const double(*)[2][4])sp, 0, &s1, err,
+                               sizeof err), 0);
+  for (int k = 0; k < 3; k++) assert_near(s1.obj_pos[k], s0.obj_pos[k], 1e-12);
+  for (int k = 0; k < 2; k++) assert_near(s1.ee_pos[k], s0.ee_pos[k], 1e-12);
+
+  sp[5][1][ND_V] = NAN;
+  assert_int_equal(nds_predict(&nm, d, &ctrl, &s0, (const double(*)[2][4])sp, N, &s1, err,
+                               sizeof err), -1);
+  assert_non_null(strstr(err, "not finite"));
+  mj_deleteData(d);
+  nds_model_free(&nm);
+}
+
 int main(void) {
   nds_test_catch_warnings();
   const struct CMUnitTest tests[] = {
@@ -377,6 +422,7 @@ int main(void) {
       cmocka_unit_test(test_deterministic),
       cmocka_unit_test(test_divergence),
       cmocka_unit_test(test_free_flight_agrees),
+      cmocka_unit_test(test_predict),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

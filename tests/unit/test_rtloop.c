@@ -219,7 +219,7 @@ static void run_scenario(exec_loop *s, exec_loop_io *io, const nd_exec_cfg *cfg,
       t_state = in.t_arrive;
     }
     if (plan_on && e % 50 == 0) {
-      exec_loop_plan_in pl;
+      exec_loop_plan_in pl = {0};
       const double sent_ago = plan_is_late(plan_k) ? LATE_S : 2e-4;
       pl.t_arrive = now - sent_ago;
       pl.utime = utime - (int64_t)llround(1e6 * sent_ago);
@@ -393,7 +393,7 @@ static void test_resent_plan_after_restart(void **state) {
     const double now = T0 + DT * (double)k;
     const int64_t utime = U0 + 1000 * k;
     post_state(now, p);
-    exec_loop_plan_in pl;
+    exec_loop_plan_in pl = {0};
     pl.t_arrive = now - 2e-4;
     pl.utime = utime - 200;
     if (k < DEAD && k % 50 == 0) {
@@ -456,6 +456,85 @@ static void test_resent_plan_after_restart(void **state) {
   assert_true(moved > 0.02);
   /* Every copy after the first renewed the segment instead of restarting it. */
   assert_true(rep.kept >= 4);
+}
+
+/* Latency compensation end to end: a planner that predicts the setpoint at a later start
+ * from one EE_CMD's setpoint and future (nd_exec_future_eval), as nudge-planner does,
+ * sends a plan that starts there; the loop keeps its segment until then, starts the new
+ * one on time, and finds its setpoint where the plan said it would be. */
+static void test_plan_start(void **state) {
+  (void)state;
+  const nd_exec_cfg cfg = nd_exec_cfg_default();
+  exec_loop_io_init(&g_io);
+  exec_loop_init(&g_loop, &cfg, TIMEOUT, 0.3, &g_io);
+  enum { SEND = 150, LEAD = 60, END = 400 };  /* ms */
+  double p[2] = {0.0, 0.0};
+  const double a[4] = {0.08, 0.02, 0.3, 0.0}, b[4] = {0.12, -0.04, 0.0, -0.2};
+  nudge_ee_cmd_t at_send = {0};
+  long on_a_before = 0, on_b_before = 0, on_b_after = 0, n_after = 0;
+  double predicted[2][4] = {{0}}, jump = 0.0, prev_p[2] = {0.0, 0.0};
+  for (long k = 0; k < END; k++) {
+    const double now = T0 + DT * (double)k;
+    const int64_t utime = U0 + 1000 * k;
+    post_state(now, p);
+    exec_loop_plan_in pl = {0};
+    pl.t_arrive = now - 2e-4;
+    pl.utime = utime - 200;
+    pl.M = 1;
+    if (k == 1) {
+      pl.plan_id = 1, pl.T = 0.3, pl.t_start = pl.t_arrive;
+      memcpy(pl.keys[0], a, sizeof a);
+      pl.start_p[0] = p[0], pl.start_p[1] = p[1];
+      nd_mailbox_post(&g_io.plan, &pl, (int)sizeof pl);
+    } else if (k == SEND) {
+      /* From the newest EE_CMD (1 ms old): where its trajectory will be LEAD ms ahead. */
+      double sp[2][4];
+      for (int ax = 0; ax < 2; ax++)
+        sp[ax][ND_P] = at_send.p[ax], sp[ax][ND_V] = at_send.v[ax],
+        sp[ax][ND_A] = at_send.a[ax], sp[ax][ND_J] = at_send.j[ax];
+      nd_exec_future f = {.t_seg_end = 1e-6 * (double)at_send.seg_end_utime,
+                          .t_brake = 1e-6 * (double)at_send.brake_utime,
+                          .t_rest = 1e-6 * (double)at_send.rest_utime,
+                          .hold = {at_send.hold[0], at_send.hold[1]}};
+      memcpy(f.key, at_send.seg_key, sizeof f.key);
+      nd_exec_future_eval((const double(*)[4])sp, 1e-6 * (double)at_send.utime, &f,
+                          1e-6 * (double)(utime + 1000 * LEAD), predicted);
+      pl.plan_id = 2, pl.T = 0.3, pl.t_start = now + 1e-3 * LEAD;
+      memcpy(pl.keys[0], b, sizeof b);
+      pl.start_p[0] = predicted[0][ND_P], pl.start_p[1] = predicted[1][ND_P];
+      nd_mailbox_post(&g_io.plan, &pl, (int)sizeof pl);
+    }
+    exec_loop_cycle(&g_loop, now, utime);
+    nudge_ee_cmd_t m;
+    while (pop_ee_cmd(&m)) {
+      if (k > 1) jump = fmax(jump, hypot(m.p[0] - prev_p[0], m.p[1] - prev_p[1]));
+      prev_p[0] = m.p[0], prev_p[1] = m.p[1];
+      p[0] = m.p[0], p[1] = m.p[1];
+      at_send = m;
+      const int on_a = hypot(m.seg_key[0] - a[0], m.seg_key[1] - a[1]) < 1e-9;
+      const int on_b = hypot(m.seg_key[0] - b[0], m.seg_key[1] - b[1]) < 1e-9;
+      if (k >= SEND && k < SEND + LEAD) on_a_before += on_a, on_b_before += on_b;
+      if (k >= SEND + LEAD) on_b_after += on_b, n_after++;
+      if (k == SEND + LEAD) {
+        printf("rtloop_start_predicted_error %.2e m\n",
+               hypot(m.p[0] - predicted[0][ND_P], m.p[1] - predicted[1][ND_P]));
+        assert_near(m.p[0], predicted[0][ND_P], 1e-6);
+        assert_near(m.p[1], predicted[1][ND_P], 1e-6);
+      }
+    }
+  }
+  exec_loop_report_post(&g_loop, T0 + 1e6, 1);
+  exec_loop_report rep;
+  uint64_t v = 0;
+  assert_int_equal(nd_mailbox_take(&g_io.report, &v, &rep, (int)sizeof rep), (int)sizeof rep);
+  assert_int_equal(on_a_before, LEAD);   /* the old segment ran until the start */
+  assert_int_equal(on_b_before, 0);
+  assert_int_equal(on_b_after, n_after); /* then the new one, from its first cycle */
+  assert_int_equal(rep.accepted, 2);
+  assert_int_equal(rep.plan_id, 2);
+  printf("rtloop_start_err_max %.2e m\n", rep.start_err_max);
+  assert_true(rep.start_err_max < 1e-6);
+  assert_true(jump < cfg.v_max * DT * 1.001);  /* continuous across the switch */
 }
 
 /* The workspace at the loop: a plan whose keypoint lies at (0.8, 0), outside the default
@@ -637,6 +716,7 @@ int main(void) {
       cmocka_unit_test(test_cycle_allocates_nothing),
       cmocka_unit_test(test_resent_plan_after_restart),
       cmocka_unit_test(test_workspace_plans),
+      cmocka_unit_test(test_plan_start),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

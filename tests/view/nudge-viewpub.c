@@ -98,8 +98,10 @@ static void mocap(pub *p, double x, double y, double yaw, double ex, double ey) 
 }
 
 static void cmd(pub *p, double x, double y, double vx, double vy) {
+  /* Its future: a segment ending here now, no brake (the view draws the trail only). */
   nudge_ee_cmd_t m = {p->t, ++p->seq, p->plan_id, p->plan_id ? p->t : 0, 0, {x, y, EE_Z},
-                      {vx, vy, 0}, {0, 0, 0}, {0, 0, 0}};
+                      {vx, vy, 0}, {0, 0, 0}, {0, 0, 0}, p->t, {x, y, 0, 0}, p->t, p->t,
+                      {x, y}};
   send(p, "EE_CMD", nudge_ee_cmd_t_encode(p->buf, 0, MAX_MSG, &m));
 }
 
