@@ -23,6 +23,10 @@ struct nds_planner {
   const nds_state *s;
   const double (*sp0)[4];
   const nd_goal *goal;
+  int over_limits, over_arm; /* candidates beyond the limits in the plan in progress */
+  int rollouts;              /* candidates simulated in it */
+  double *feas;              /* cap x dim: the candidates within the limits, simulated */
+  int *feas_idx;             /* their index in the batch */
 };
 
 void nds_planner_cfg_default(nds_planner_cfg *cfg) {
@@ -52,28 +56,80 @@ void nds_planner_cfg_default(nds_planner_cfg *cfg) {
   cfg->w = nd_cost_weights_default();
   nds_ctrl_cfg_default(&cfg->ctrl);
   cfg->free_flight = 1;
+  /* At the limit itself: the lab's box and Cartesian limits already keep to 0.87 of the
+   * joint velocity and 0.9 of the acceleration limits (from rest); a margin below that
+   * slowed the lab pushes (doc/decisions.md#arm-aware). */
+  cfg->reach_max = 1.0;
   cfg->seed = 1;
 }
 
+/* Peaks over the setpoints of keys from sp0, sampled at the rollouts' step: speed,
+ * acceleration and, with an arm, its load (nds_reach_load). The setpoints alone decide
+ * them: no physics needed. */
+static void setpoint_peaks(const nds_planner *p, const double *keys, double peak[3]) {
+  const nds_planner_cfg *c = &p->cfg;
+  nd_snap_seg seg;
+  double s[2][4], sp[2][4];
+  memcpy(s, p->sp0, sizeof(s));
+  const int n = (int)ceil(c->T / nds_batch_model(p->batch, 0)->m->opt.timestep - 1e-9);
+  double v2 = 0.0, a2 = 0.0, load = 0.0;
+  for (int i = 0; i < c->M; i++) {
+    const double *k = keys + 4 * i;
+    nd_snap_seg_make(&seg, (const double(*)[4])s, k, k + 2, c->T);
+    for (int j = 0; j < n; j++) {
+      nd_snap_seg_eval(&seg, j * c->T / n, sp);
+      const double sv = sp[0][ND_V] * sp[0][ND_V] + sp[1][ND_V] * sp[1][ND_V];
+      const double sa = sp[0][ND_A] * sp[0][ND_A] + sp[1][ND_A] * sp[1][ND_A];
+      if (!(sv <= v2)) v2 = sv;
+      if (!(sa <= a2)) a2 = sa;
+      if (c->reach) {
+        const double pos[2] = {sp[0][ND_P], sp[1][ND_P]};
+        const double l = nds_reach_load(c->reach, pos, sqrt(sv), sqrt(sa));
+        if (!(l <= load)) load = l;
+      }
+    }
+    nd_snap_seg_eval(&seg, c->T, s);
+  }
+  peak[0] = sqrt(v2);
+  peak[1] = sqrt(a2);
+  peak[2] = load;
+}
+
+/* A candidate beyond the limits costs a step penalty plus its relative excess, which ranks
+ * it behind every candidate the robot could execute (task costs are far below
+ * limit_penalty; doc/decisions.md#planner-limits); as nothing can change that, it is not
+ * simulated (doc/decisions.md#skip-infeasible). The others are rolled out. */
 static int plan_cost(void *ctx, const double *x, int n, double *cost) {
   nds_planner *p = ctx;
   const nds_planner_cfg *c = &p->cfg;
   if (n > p->cap) return -1;
-  nds_batch_rollouts(p->batch, &c->ctrl, p->s, p->sp0, x, n, c->M, c->T, p->outs);
+  int m = 0;
   for (int i = 0; i < n; i++) {
-    const nds_rollout_out *o = &p->outs[i];
-    if (o->diverged) {
-      cost[i] = INFINITY;
+    double pk[3];
+    setpoint_peaks(p, x + i * p->dim, pk);
+    double ex = fmax(0.0, pk[0] / c->v_max - 1.0) + fmax(0.0, pk[1] / c->a_max - 1.0);
+    p->over_limits += ex > 0.0;
+    if (c->reach) {
+      /* The arm's joints count as its Cartesian limits; no IK counts as twice the limit. */
+      const double ea = fmin(2.0, fmax(0.0, pk[2] / c->reach_max - 1.0));
+      p->over_arm += ea > 0.0;
+      ex += ea;
+    }
+    if (!(ex <= 0.0)) {
+      cost[i] = c->limit_penalty * (1.0 + (isfinite(ex) ? ex : 1e3));
       continue;
     }
-    double e = nd_cost_plan(&c->w, p->goal, o->obj_xy, o->obj_yaw, o->ee_xy, o->acc_sq_mean);
-    /* A step penalty plus the relative excess ranks every candidate the robot could not
-     * execute behind every one it could (task costs are far below limit_penalty;
-     * doc/decisions.md#planner-limits). */
-    double ex = fmax(0.0, o->v_peak / c->v_max - 1.0) + fmax(0.0, o->a_peak / c->a_max - 1.0);
-    if (ex > 0.0) e += c->limit_penalty * (1.0 + ex);
-    cost[i] = e;
+    memcpy(p->feas + m * p->dim, x + i * p->dim, sizeof(double) * p->dim);
+    p->feas_idx[m++] = i;
   }
+  if (m > 0) nds_batch_rollouts(p->batch, &c->ctrl, p->s, p->sp0, p->feas, m, c->M, c->T, p->outs);
+  for (int k = 0; k < m; k++) {
+    const nds_rollout_out *o = &p->outs[k];
+    cost[p->feas_idx[k]] =
+        o->diverged ? INFINITY
+                    : nd_cost_plan(&c->w, p->goal, o->obj_xy, o->obj_yaw, o->ee_xy, o->acc_sq_mean);
+  }
+  p->rollouts += m;
   return 0;
 }
 
@@ -129,7 +185,9 @@ nds_planner *nds_planner_create(const nds_model *model, const nds_planner_cfg *c
     return NULL;
   }
   p->cap = nd_cem_max_batch(p->cem);
-  if (!(p->outs = calloc(p->cap, sizeof(*p->outs)))) {
+  if (!(p->outs = calloc(p->cap, sizeof(*p->outs))) ||
+      !(p->feas = calloc((size_t)p->cap * p->dim, sizeof(double))) ||
+      !(p->feas_idx = calloc(p->cap, sizeof(int)))) {
     snprintf(err, errlen, "planner: out of memory");
     nds_planner_free(p);
     return NULL;
@@ -149,6 +207,8 @@ void nds_planner_free(nds_planner *p) {
   nds_batch_free(p->batch);
   nd_cem_free(p->cem);
   free(p->outs);
+  free(p->feas);
+  free(p->feas_idx);
   free(p->lower);
   free(p);
 }
@@ -199,6 +259,7 @@ int nds_planner_plan(nds_planner *p, const nds_state *s, const double sp0[2][4],
   p->s = s;
   p->sp0 = sp0;
   p->goal = goal;
+  p->over_limits = p->over_arm = p->rollouts = 0;
   int rc = nd_cem_run(p->cem, &p->rng, plan_cost, p);
   if (rc) {
     snprintf(err, errlen, "planner: rollout batch larger than %d", p->cap);
@@ -210,6 +271,9 @@ int nds_planner_plan(nds_planner *p, const nds_state *s, const double sp0[2][4],
   for (int k = 0; k < c->M; k++) memcpy(out->keys[k], best + 4 * k, 4 * sizeof(double));
   out->cost = nd_cem_best_cost(p->cem);
   out->evals = nd_cem_evals(p->cem);
+  out->rollouts = p->rollouts;
+  out->over_limits = p->over_limits;
+  out->over_arm = p->over_arm;
   /* What the best plan predicts, for logging, drawing and the plan message; a diverged
    * rollout predicts the object stays where it is. */
   nds_rollout_out o;

@@ -1,7 +1,8 @@
 /* nds_planner: one MPC planning step. (state, setpoint, goal, theta, previous plan) ->
  * best keypoint sequence, by iCEM over M keypoints (x, y, vx, vy) with MuJoCo rollouts
  * on the pool. Candidates whose segments exceed the end-effector speed or acceleration
- * limits are penalised, so what is planned is what the robot can execute. */
+ * limits (or, with an arm's reach map, its joints') are penalised and not simulated, so what
+ * is planned is what the robot can execute and no time goes to what it cannot. */
 #ifndef NDS_PLANNER_H
 #define NDS_PLANNER_H
 
@@ -9,6 +10,7 @@
 
 #include "nd_cem.h"
 #include "nd_cost.h"
+#include "nds_reach.h"
 #include "nds_rollout.h"
 
 typedef struct {
@@ -26,6 +28,10 @@ typedef struct {
   nds_ctrl_cfg ctrl;
   int free_flight;          /* rollouts skip MuJoCo while the sphere is far from the object
                              * (nds_rollout_ff); 1 by default */
+  const nds_reach *reach;   /* the arm's joint-limit map (not owned; NULL: no arm, the
+                             * default): candidates loading a joint beyond reach_max are
+                             * penalised as limit breakers */
+  double reach_max;         /* load allowed (nds_reach_load), 1 by default */
   uint64_t seed;
 } nds_planner_cfg;
 
@@ -40,7 +46,9 @@ typedef struct {
   double cost;              /* E of the best candidate (penalties included) */
   double task_error;        /* predicted L_pos + w_rot L_rot at the horizon */
   double predicted[3];      /* the object's pose (x, y, yaw) the best rollout ends at */
-  int evals;                /* rollouts run */
+  int evals;                /* candidates scored */
+  int rollouts;             /* of them simulated: those within the limits */
+  int over_limits, over_arm; /* of them: beyond the Cartesian limits, beyond the arm's */
 } nds_plan;
 
 typedef struct nds_planner nds_planner;

@@ -311,8 +311,9 @@ int main(int argc, char **argv) {
       med[k] = nd_quantile(lat, reps, 0.5);
       p90[k] = nd_quantile(lat, reps, 0.9);
       printf("plan N %3d C %d, H 0.6 s, M 2, %d workers, free flight %s: median %.1f ms, p90 "
-             "%.1f ms (%d rollouts)\n", cfg.pop, cfg.iters, nd_pool_size(pool),
-             cfg.free_flight ? "on" : "off", med[k], p90[k], plan.evals);
+             "%.1f ms (%d candidates, %d simulated: the others beyond the limits)\n", cfg.pop,
+             cfg.iters, nd_pool_size(pool), cfg.free_flight ? "on" : "off", med[k], p90[k],
+             plan.evals, plan.rollouts);
       nds_planner_free(p);
     }
     brute_ms = 1e3 * 50.0 * 2.0 * nsteps / (raw_rate * nd_pool_size(pool));

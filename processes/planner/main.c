@@ -4,6 +4,7 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "nd_exec.h"
 #include "nd_opt.h"
 #include "planner.h"
 
@@ -11,6 +12,8 @@ int main(int argc, char **argv) {
   planner_opts o = {.threads = ndp_default_threads(), .pop = 50, .iters = 2, .seed = 1,
                     .max_rate = 20.0, .state_timeout = 0.1, .lead = 1};
   static const char *const lead_words[] = {"off", "on", NULL};
+  static const char *const arm_words[] = {"none", "panda", NULL};
+  int arm = 0;
   /* 10 ms, not the demo's 5 ms: on one core it plans at ~19 Hz while pushing, above the
    * 10 Hz the executor's 0.1 s plan timeout needs; 5 ms did not reach that. Its cost in
    * prediction error is in nudge-bench (doc/decisions.md#plan-dt). */
@@ -52,6 +55,12 @@ int main(int argc, char **argv) {
                "which refuses plans beyond its own (nudge-up --world lab sets both)"},
       {"a-max", ND_OPT_DOUBLE, &pc.a_max, 1e-3, 1000.0, .arg = "M/S2",
        .help = "end-effector acceleration a plan may reach; below nudge-executor's --a-max"},
+      {"arm", ND_OPT_CHOICE, &arm, .choices = arm_words, .arg = "none|panda", .def = "none",
+       .help = "the robot's arm: panda ranks plans that would bring one of its joints near "
+               "a velocity or acceleration limit behind every plan that would not, as the "
+               "Cartesian limits do (the lab world's arm; nudge-up --world lab sets it)"},
+      {"arm-load", ND_OPT_DOUBLE, &pc.reach_max, 0.1, 1.0, .arg = "R",
+       .help = "with --arm: the share of a joint limit a plan may use"},
       {"segment-time", ND_OPT_DOUBLE, &pc.T, 0.05, 2.0, .arg = "S",
        .help = "duration of each keypoint's minimum-snap segment (the horizon is M times it); "
                "slower arms need longer ones to move as far"},
@@ -70,6 +79,7 @@ int main(int argc, char **argv) {
   char err[512] = "";
   int status = 1;
   nds_model pm = {0};
+  nds_reach reach = {0};
   nd_pool *pool = NULL;
   static planner_proc p;
   p.o = &o;
@@ -86,6 +96,15 @@ int main(int argc, char **argv) {
   pc.seed = o.seed;
   pc.key_v_max = fmin(pc.key_v_max, pc.v_max);
   for (int k = 0; k < 2; k++) pc.ws_lo[k] = o.ws.lo[k], pc.ws_hi[k] = o.ws.hi[k];
+  if (arm) {
+    /* The keypoints' box plus the room segments and brakes take beyond it. */
+    nds_panda_cfg ac;
+    nds_panda_cfg_default(&ac);
+    const double m = ND_EXEC_WS_MARGIN + 0.01;
+    const double lo[2] = {pc.ws_lo[0] - m, pc.ws_lo[1] - m}, hi[2] = {pc.ws_hi[0] + m, pc.ws_hi[1] + m};
+    if (nds_reach_build(&reach, &ac, lo, hi, 0.02, err, sizeof(err))) goto done;
+    pc.reach = &reach;
+  }
   if (nds_model_init(&pm, &sc, err, sizeof(err)) ||
       !(pool = nd_pool_create(o.threads, err, sizeof(err))) ||
       !(p.planner = nds_planner_create(&pm, &pc, pool, err, sizeof(err))) ||
@@ -99,10 +118,10 @@ int main(int argc, char **argv) {
 
   fprintf(stderr,
           PROG ": %s, iCEM N %d C %d, M %d, T %.2f s, plan dt %.4f s, %d worker(s), max %.1f "
-          "plans/s, lead %s, state timeout %.3f s, theta (%g, %g, %g, %g), seed %llu, keypoints in "
+          "plans/s, lead %s, arm %s (load <= %g), state timeout %.3f s, theta (%g, %g, %g, %g), seed %llu, keypoints in "
           "x [%g, %g] y [%g, %g] m, v_max %g m/s, a_max %g m/s^2\n",
           ndp_url(o.url), o.pop, o.iters, pc.M, pc.T, o.plan_dt, o.threads, o.max_rate,
-          lead_words[o.lead], o.state_timeout, o.theta[0], o.theta[1], o.theta[2], o.theta[3],
+          lead_words[o.lead], arm_words[arm], pc.reach_max, o.state_timeout, o.theta[0], o.theta[1], o.theta[2], o.theta[3],
           (unsigned long long)o.seed, pc.ws_lo[0], pc.ws_hi[0], pc.ws_lo[1], pc.ws_hi[1],
           pc.v_max, pc.a_max);
 
@@ -152,5 +171,6 @@ done:
   nds_planner_free(p.planner);
   nd_pool_free(pool);
   nds_model_free(&pm);
+  nds_reach_free(&reach);
   return status;
 }

@@ -104,6 +104,9 @@ int planner_plan_once(planner_proc *p, double now, char *err, int errlen) {
   p->st.published++;
   p->task_plans++;
   p->task_ms_sum += ms;
+  p->task_evals += plan.evals;
+  p->task_over_limits += plan.over_limits;
+  p->task_over_arm += plan.over_arm;
   if (ms > p->task_ms_max) p->task_ms_max = ms;
   return 0;
 }

@@ -398,7 +398,7 @@ pt_check "nudge-up demo --world lab with stand-ins exits 0 (got $rc)" test "$rc"
 LAB=-0.15,-0.30,0.15,0.40
 args_are nudge-bridge --workspace "$LAB" --world lab
 args_are nudge-executor --workspace "$LAB" --v-max 0.5 --a-max 2.0
-args_are nudge-planner --workspace "$LAB" --v-max 0.45 --a-max 1.8 --segment-time 0.6 --pop 16
+args_are nudge-planner --workspace "$LAB" --v-max 0.45 --a-max 1.8 --segment-time 0.6 --arm panda --pop 16
 args_are nudge-tasks --record "$W/lab.nrb" --world lab
 rm -f "$W"/*.args
 "$FAKE/nudge-up" demo --world lab --workspace "$WS" --lcm-url memq:// --log-dir "$W/logs-lab2" \

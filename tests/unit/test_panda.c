@@ -5,6 +5,7 @@
 #include "nd_snap.h"
 #include "nd_test.h"
 #include "nds_panda.h"
+#include "nds_reach.h"
 
 #define NJ NDS_PANDA_NJ
 #define DT 0.001
@@ -308,6 +309,58 @@ static void test_ik_workspace_grid(void **state) {
   assert_contains(err, "unreachable");
   assert_int_equal(nds_panda_ik(&cfg, near, NULL, q, err, sizeof(err)), -1);
   assert_contains(err, "IK: (-0.300");
+}
+
+/* The reach map agrees with IK at points between its nodes, serves the lab box at the
+ * lab's 0.5 m/s, shows where beyond it the arm cannot go that fast, and is infinite
+ * where there is no IK or no map. */
+static void test_reach_map(void **state) {
+  (void)state;
+  nds_panda_cfg cfg;
+  nds_panda_cfg_default(&cfg);
+  const double z = nds_panda_push_height(&cfg);
+  const double lo[2] = {-0.30, -0.45}, hi[2] = {0.30, 0.55};
+  nds_reach r;
+  char err[256] = "";
+  if (nds_reach_build(&r, &cfg, lo, hi, 0.02, err, sizeof err)) fail_msg("%s", err);
+  assert_int_equal(r.nx, 31);
+  assert_int_equal(r.ny, 51);
+  double worst_rel = 0.0, lab_worst = 0.0;
+  double q[NJ];
+  for (double x = NDS_PANDA_WS_XMIN; x <= NDS_PANDA_WS_XMAX + 1e-9; x += 0.0137) {
+    for (double y = NDS_PANDA_WS_YMIN; y <= NDS_PANDA_WS_YMAX + 1e-9; y += 0.0213) {
+      const double t[3] = {x, y, z}, p[2] = {x, y};
+      if (nds_panda_ik(&cfg, t, NULL, q, err, sizeof err)) fail_msg("%s", err);
+      const double direct = nds_panda_speed_ratio(&cfg, q, NDS_PANDA_WS_SPEED);
+      const double mapped = nds_reach_load(&r, p, NDS_PANDA_WS_SPEED, 0.0);
+      worst_rel = fmax(worst_rel, fabs(mapped / direct - 1.0));
+      lab_worst = fmax(lab_worst, mapped);
+      /* Linear in the rates, the larger of the two. */
+      assert_near(nds_reach_load(&r, p, 2 * NDS_PANDA_WS_SPEED, 0.0), 2 * mapped, 1e-9);
+      assert_true(nds_reach_load(&r, p, NDS_PANDA_WS_SPEED, 1.0) >= mapped);
+    }
+  }
+  int over = 0;
+  for (int c = 0; c < r.nx * r.ny; c++) over += r.vr[c] * NDS_PANDA_WS_SPEED > 1.0;
+  print_message("reach: map vs IK within %.2f %%, lab box at 0.5 m/s worst %.3f, %d of %d "
+                "cells beyond 0.5 m/s, %d unreachable\n", 100 * worst_rel, lab_worst, over,
+                r.nx * r.ny, r.unreachable);
+  assert_true(worst_rel < 0.05);
+  assert_true(lab_worst <= NDS_PANDA_WS_SPEED_RATIO * 1.02);
+  assert_true(over > 0);
+  const double off_map[2] = {0.8, 0.0};
+  assert_true(isinf(nds_reach_load(&r, off_map, 0.1, 0.0)));
+  assert_true(isinf(nds_reach_load(&r, (const double[2]){NAN, 0.0}, 0.1, 0.0)));
+  if (r.unreachable) {
+    int c = 0;
+    while (isfinite(r.vr[c])) c++;
+    const double p[2] = {lo[0] + (c % r.nx) * 0.02, lo[1] + (c / r.nx) * 0.02};
+    assert_true(isinf(nds_reach_load(&r, p, 0.0, 0.0)));
+  }
+  nds_reach_free(&r);
+  const double bad_hi[2] = {-0.4, 0.0};
+  assert_int_equal(nds_reach_build(&r, &cfg, lo, bad_hi, 0.02, err, sizeof err), -1);
+  assert_contains(err, "reach: box");
 }
 
 /* ---- control ---- */
@@ -707,6 +760,7 @@ int main(void) {
       cmocka_unit_test(test_reflex_on_fast_segment),
       cmocka_unit_test(test_brake_holds),
       cmocka_unit_test(test_reflex_kinds),
+      cmocka_unit_test(test_reach_map),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
