@@ -99,6 +99,12 @@ static void setpoint_peaks(const nds_planner *p, const double *keys, double peak
  * it behind every candidate the robot could execute (task costs are far below
  * limit_penalty; doc/decisions.md#planner-limits); as nothing can change that, it is not
  * simulated (doc/decisions.md#skip-infeasible). The others are rolled out. */
+void nds_planner_cfg_fit_limits(nds_planner_cfg *cfg) {
+  cfg->key_v_max = fmin(cfg->key_v_max, cfg->v_max / sqrt(2.0));
+  cfg->std_init[2] = fmin(cfg->std_init[2], 0.25 * cfg->v_max);
+  cfg->std_init[3] = fmin(cfg->std_init[3], 0.25 * cfg->v_max);
+}
+
 static int plan_cost(void *ctx, const double *x, int n, double *cost) {
   nds_planner *p = ctx;
   const nds_planner_cfg *c = &p->cfg;

@@ -62,6 +62,12 @@ void nds_planner_free(nds_planner *p);
 int nds_planner_set_theta(nds_planner *p, const double theta[ND_NTHETA], char *err,
                           int errlen);
 
+/* Fit the sampler to cfg's v_max: keypoint velocities within v_max / sqrt 2 per axis (so
+ * within v_max together) and a velocity spread of at most v_max / 4. Unchanged at the
+ * default limits; at the lab's 0.45 m/s most candidates were beyond them otherwise
+ * (doc/decisions.md#skip-infeasible). */
+void nds_planner_cfg_fit_limits(nds_planner_cfg *cfg);
+
 /* The configuration the planner runs with. */
 const nds_planner_cfg *nds_planner_config(const nds_planner *p);
 

@@ -10,7 +10,7 @@
 
 int main(int argc, char **argv) {
   planner_opts o = {.threads = ndp_default_threads(), .pop = 50, .iters = 2, .seed = 1,
-                    .max_rate = 20.0, .state_timeout = 0.1, .lead = 1};
+                    .max_rate = 40.0, .state_timeout = 0.1, .lead = 1};
   static const char *const lead_words[] = {"off", "on", NULL};
   static const char *const arm_words[] = {"none", "panda", NULL};
   int arm = 0;
@@ -94,7 +94,7 @@ int main(int argc, char **argv) {
   pc.pop = o.pop;
   pc.iters = o.iters;
   pc.seed = o.seed;
-  pc.key_v_max = fmin(pc.key_v_max, pc.v_max);
+  nds_planner_cfg_fit_limits(&pc);
   for (int k = 0; k < 2; k++) pc.ws_lo[k] = o.ws.lo[k], pc.ws_hi[k] = o.ws.hi[k];
   if (arm) {
     /* The keypoints' box plus the room segments and brakes take beyond it. */
