@@ -14,6 +14,7 @@
 #include <string.h>
 
 #include "nd_cem.h"
+#include "nds_fit_int.h"
 
 /* The weights of L (the paper's are not legible). k1 = 1: the sphere's path is as much an
  * observation as the object's. k2 = 1e-3 m^2/rad: L_rot,o is a mean absolute angle, so a
@@ -53,49 +54,6 @@
 /* Default prior width: the paper's smaller uncertainty, D = 0.2. */
 #define NDS_FIT_D_DEFAULT 0.2
 
-struct nds_fit {
-  nds_fit_cfg cfg;
-  nd_pool *pool;
-  int nworkers;
-  nds_model proto;      /* the model as given, for checking records against it */
-  nds_model *models;    /* one per worker */
-  mjData **data;
-  double *cur;          /* nworkers x ND_NTHETA: theta each worker's model holds, NaN none */
-  nd_cem *cem;
-  nd_rng rng;
-  int nfit, idx[ND_NTHETA];  /* fitted parameters, in theta order */
-  double scale[ND_NTHETA];   /* sigma0 of each fitted parameter (CEM space = theta / scale) */
-  double hold[ND_NTHETA];    /* the full theta; fitted entries are overwritten per candidate */
-
-  int cand_cap;         /* rows of theta: nd_cem_max_batch */
-  double *theta;        /* cand_cap x ND_NTHETA candidates of the current batch */
-  size_t terms_cap;
-  nds_replay_terms *terms;  /* cand x rollout, candidate-major */
-
-  /* The current batch, read by the tasks. */
-  const nd_rollout *rs;
-  int nr;
-  int task_err;         /* a task could not replay (only on a record changed under us) */
-
-  /* Pruning (cfg.prune): a candidate is dropped once the L of its finished and running
-   * replays already exceeds the nelite-th best complete total of the batch. */
-  int nelite;           /* as nd_cem counts them */
-  int bounded;          /* this batch may prune (CEM iterations, not single evaluations) */
-  double robust;        /* this batch's robust scale (0: it scores L) */
-  pthread_mutex_t lock; /* guards the fields below during a batch */
-  double *done;         /* cand_cap: L of each candidate's finished replays (any order) */
-  int *left;            /* cand_cap: replays not yet finished */
-  unsigned char *cut;   /* cand_cap: candidate dropped */
-  double *top;          /* nelite smallest complete totals, ascending */
-  int *order;           /* cand_cap: candidates in the order their replays are handed out */
-  int ntop;
-  int nrun;             /* replays run in the batch */
-  int r0, nrp;          /* this pass replays rollouts [r0, r0 + nrp) of each candidate */
-  int lock_init;
-
-  double cost_lo, cost_hi; /* finite candidate costs of the current run */
-  int cost_cut;            /* a candidate of the current run was pruned */
-};
 
 /* Candidate costs that differ by no more than this (m^2) are the same: a buffer that gives
  * every candidate the same L says nothing about the fitted parameters. Rollouts in which
@@ -180,6 +138,10 @@ int nds_fit_cfg_check(const nds_fit_cfg *c, char *err, int errlen) {
   }
   if (nfit == 0) {
     snprintf(err, errlen, "fit: no parameter is fitted");
+    return -1;
+  }
+  if (c->lm_iters < 0 || c->lm_iters > 50) {
+    snprintf(err, errlen, "fit: lm_iters = %d, must be in [0, 50]", c->lm_iters);
     return -1;
   }
   /* What the first candidate sees: fitted entries at their clipped prior mean. */
@@ -327,9 +289,16 @@ void nds_fit_dist(const nds_fit *f, double mean[ND_NTHETA], double std[ND_NTHETA
   }
 }
 
-/* Candidate theta of CEM point x: held entries, fitted ones scaled back (and kept at
- * lower, which the product may miss by a rounding). */
-static void to_theta(const nds_fit *f, const double *x, double *th) {
+int nds_fit_hold(nds_fit *f, int worker, const double th[ND_NTHETA]) {
+  double *cur = f->cur + (size_t)ND_NTHETA * worker;
+  if (memcmp(cur, th, sizeof(double) * ND_NTHETA) == 0) return 0;
+  char err[160];
+  const int ok = nds_theta_apply(&f->models[worker], th, err, sizeof(err)) == 0;
+  for (int i = 0; i < ND_NTHETA; i++) cur[i] = ok ? th[i] : NAN;
+  return ok ? 0 : -1;
+}
+
+void nds_fit_to_theta(const nds_fit *f, const double *x, double *th) {
   memcpy(th, f->hold, sizeof(double) * ND_NTHETA);
   for (int j = 0; j < f->nfit; j++) th[f->idx[j]] = fmax(f->cfg.lower, x[j] * f->scale[j]);
 }
@@ -384,15 +353,8 @@ static void replay_task(void *ctx, int task, int worker) {
     memset(out, 0, sizeof(*out));
     out->cut = 1;
   } else {
-    const double *th = f->theta + (size_t)ND_NTHETA * c;
-    double *cur = f->cur + (size_t)ND_NTHETA * worker;
     nds_model *nm = &f->models[worker];
-    int ok = 1;
-    if (memcmp(cur, th, sizeof(double) * ND_NTHETA) != 0) {
-      ok = nds_theta_apply(nm, th, err, sizeof(err)) == 0;
-      for (int i = 0; i < ND_NTHETA; i++) cur[i] = ok ? th[i] : NAN;
-    }
-    if (!ok) {
+    if (nds_fit_hold(f, worker, f->theta + (size_t)ND_NTHETA * c)) {
       memset(out, 0, sizeof(*out));
       out->pos_o = out->pos_ee = out->rot_o = out->robust = NDS_REPLAY_DIVERGED;
       out->diverged = 1;
@@ -492,7 +454,7 @@ static void eval_batch(nds_fit *f, int ncand, int prune, double robust, double *
 
 static int cem_cost(void *ctx, const double *x, int n, double *cost) {
   nds_fit *f = ctx;
-  for (int c = 0; c < n; c++) to_theta(f, x + (size_t)c * f->nfit, f->theta + ND_NTHETA * c);
+  for (int c = 0; c < n; c++) nds_fit_to_theta(f, x + (size_t)c * f->nfit, f->theta + ND_NTHETA * c);
   eval_batch(f, n, 1, f->cfg.robust, cost);
   for (int c = 0; c < n; c++) {
     if (isfinite(cost[c])) {
@@ -580,8 +542,21 @@ int nds_fit_run(nds_fit *f, const nd_rollout *rs, int n, nds_fit_out *out, char 
 
   memset(out, 0, sizeof(*out));
   out->flat = flat;
+  if (f->cfg.lm_iters > 0 && !flat) {
+    double th[ND_NTHETA], sd[ND_NTHETA], xm[ND_NTHETA];
+    nds_fit_dist(f, th, sd);
+    if (nds_fit_refine(f, rs, n, th, out, err, errlen)) {
+      nd_cem_set_dist(f->cem, m0, s0);
+      f->rng = r0;
+      return -1;
+    }
+    double xs[ND_NTHETA];
+    memcpy(xs, nd_cem_std(f->cem), sizeof(double) * f->nfit);
+    for (int j = 0; j < f->nfit; j++) xm[j] = th[f->idx[j]] / f->scale[j];
+    nd_cem_set_dist(f->cem, xm, xs);
+  }
   nds_fit_dist(f, out->mean, out->std);
-  to_theta(f, nd_cem_best(f->cem), out->best);
+  nds_fit_to_theta(f, nd_cem_best(f->cem), out->best);
   out->best_loss = nd_cem_best_cost(f->cem);
   out->iters = f->cfg.iters;
   for (int i = 0; i < out->iters; i++) out->iter_best[i] = nd_cem_iter_best(f->cem, i);
@@ -589,6 +564,6 @@ int nds_fit_run(nds_fit *f, const nd_rollout *rs, int n, nds_fit_out *out, char 
   memcpy(f->theta, out->mean, sizeof(out->mean));
   eval_batch(f, 1, 0, 0, &out->loss_mean);
   for (int r = 0; r < n; r++) out->diverged_mean += f->terms[r].diverged;
-  out->replays = f->nrun;
+  out->replays = f->nrun + out->lm_replays;
   return 0;
 }

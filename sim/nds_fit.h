@@ -57,6 +57,9 @@ typedef struct {
   int prune;                   /* 1: stop replaying a candidate once it cannot be an elite
                                   (same results, less work: see nds_fit.c); 0: replay all */
   nds_replay_cfg replay;       /* how rollouts are replayed (mode, robot controller) */
+  int lm_iters;                /* > 0: after CEM, at most this many Levenberg-Marquardt
+                                  iterations on the replays' residuals from CEM's mean, which
+                                  also give a covariance (nds_fit_out.lm_*); 0: off */
   uint64_t seed;
 } nds_fit_cfg;
 
@@ -65,7 +68,7 @@ typedef struct {
  * k2 = 1e-3 m^2/rad; prune; seed 1. Beyond the paper (nds_fit.c; doc/decisions.md):
  * step_std 2 gated at 0.75 std, std_floor 0.25, rel_floor 0.05, FORCE replay re-anchored
  * on the observed full pose every 5 ms with the default controller, candidates ranked by
- * L (robust 0). */
+ * L (robust 0), no Levenberg-Marquardt refinement (lm_iters 0). */
 void nds_fit_cfg_default(nds_fit_cfg *cfg);
 
 /* Check cfg. Return 0, or -1 naming the bad field. */
@@ -92,6 +95,15 @@ typedef struct {
                                   nothing about the fitted parameters, e.g. the sphere
                                   never touched the box): the distribution is left as it
                                   was; best and iter_best still report the draws */
+  /* With cfg.lm_iters (and not flat): the refinement from CEM's mean. Its result is the
+   * distribution's mean from then on (the std stays CEM's, to search with); lm_std is the
+   * standard error of the estimate, sqrt of the diagonal of sigma^2 (J'J)^-1 inflated for
+   * residuals correlated in time (nd_lm), 0 for held entries, NaN where J'J is singular. */
+  int lm_run;                  /* 1: the refinement ran */
+  int lm_iters, lm_replays;    /* its iterations, and rollout replays */
+  double lm_cost0, lm_cost;    /* |r|^2 at CEM's mean and at the result */
+  double lm_std[ND_NTHETA];
+  double lm_inflation;         /* the correlation correction applied to the covariance */
 } nds_fit_out;
 
 typedef struct nds_fit nds_fit;

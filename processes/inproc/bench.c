@@ -194,6 +194,61 @@ static int world_pushes(const nds_world_cfg *base, const double *keys, int n, in
   return 0;
 }
 
+/* The refit's cost and accuracy, CEM alone against a cheaper CEM refined by
+ * Levenberg-Marquardt: in the adapter's configuration (wc at 2 ms, its window) over recs,
+ * from NSEED draws of the D = 1 prior. Prints a line per run and the figures. */
+static int bench_refine(const nds_scene_cfg *wc, const nd_rollout *recs, int nrec,
+                        nd_pool *pool) {
+  enum { NSEED = 3, NCFG = 2 };
+  static const int pop[NCFG] = {32, 16}, iters[NCFG] = {2, 1}, lm[NCFG] = {0, 4};
+  static const char *const name[NCFG] = {"cem", "lm4"};
+  double reps[NCFG][NSEED], e_s[NCFG][NSEED], e_t[NCFG][NSEED];
+  char err[256];
+  nds_scene_cfg fc = *wc;
+  fc.timestep = 0.002;
+  nds_model fm = {0};
+  if (nds_model_init(&fm, &fc, err, sizeof(err))) goto fail;
+  for (int k = 0; k < NCFG; k++) {
+    for (int sd = 0; sd < NSEED; sd++) {
+      nds_fit_cfg cfg;
+      nds_fit_cfg_default(&cfg);
+      cfg.replay.window = NDS_FIT_WINDOW_MOCAP;
+      cfg.pop = pop[k], cfg.iters = iters[k], cfg.lm_iters = lm[k];
+      nd_rng rr;
+      nd_rng_seed(&rr, 1 + sd, 7);
+      nds_fit_paper_prior(nd_theta_true, 1.0, cfg.lower, &rr, cfg.mu0, cfg.sigma0);
+      cfg.mu0[ND_TH_MASS] = nd_theta_true[ND_TH_MASS];
+      nds_fit *fit = nds_fit_create(&fm, &cfg, pool, err, sizeof(err));
+      nds_fit_out fo;
+      if (!fit || nds_fit_run(fit, recs, nrec, &fo, err, sizeof(err))) {
+        nds_fit_free(fit);
+        goto fail;
+      }
+      nds_fit_free(fit);
+      reps[k][sd] = fo.replays;
+      e_s[k][sd] = fabs(fo.mean[ND_TH_SLIDE] / nd_theta_true[ND_TH_SLIDE] - 1.0);
+      e_t[k][sd] = fabs(fo.mean[ND_TH_TORSION] / nd_theta_true[ND_TH_TORSION] - 1.0);
+      printf("refit Q %d C %d + LM %d, prior draw %d: %d replays, sliding %.4f (from %.3f), "
+             "torsional %.5f (from %.5f)", cfg.pop, cfg.iters, cfg.lm_iters, sd + 1,
+             fo.replays, fo.mean[0], cfg.mu0[0], fo.mean[1], cfg.mu0[1]);
+      if (fo.lm_run)
+        printf(", its std %.4f / %.5f", fo.lm_std[ND_TH_SLIDE], fo.lm_std[ND_TH_TORSION]);
+      printf("\n");
+    }
+  }
+  nds_model_free(&fm);
+  for (int k = 0; k < NCFG; k++) {
+    printf("refit_replays_%s %.0f count\n", name[k], nd_quantile(reps[k], NSEED, 0.5));
+    printf("refit_slide_err_%s %.4f ratio\n", name[k], nd_quantile(e_s[k], NSEED, 0.5));
+    printf("refit_torsion_err_%s %.4f ratio\n", name[k], nd_quantile(e_t[k], NSEED, 0.5));
+  }
+  return 0;
+fail:
+  fprintf(stderr, "nudge-bench: %s\n", err);
+  nds_model_free(&fm);
+  return -1;
+}
+
 int main(int argc, char **argv) {
   char err[512];
   int sections = SEC_PLAN | SEC_PREDICT | SEC_LAB | SEC_FIT;
@@ -510,6 +565,7 @@ int main(int argc, char **argv) {
         nds_model_free(&fm);
       }
     }
+    if (bench_refine(&wc, recs, NREC, fpool)) return 1;
     refit_s[0] = nd_quantile(rep_s, REFIT_REPS, 0.5);  /* sorts rep_s */
     printf("refit in the adapter's configuration, %d times: median %.2f s (%.2f..%.2f)\n",
            REFIT_REPS, refit_s[0], rep_s[0], rep_s[REFIT_REPS - 1]);

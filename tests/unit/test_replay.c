@@ -644,6 +644,56 @@ static void test_fit_recovers_sliding(void **state) {
   nd_pool_free(pool);
 }
 
+/* Levenberg-Marquardt after a cheap CEM (Q 16, C 1) from the same far start, on records
+ * the 1 ms model replays exactly: it lands on the truth, its interval is finite, and it
+ * moves the distribution's mean (not its std). A bad lm_iters is refused. */
+static void test_fit_refine(void **state) {
+  (void)state;
+  char err[256];
+  nd_pool *pool = nd_pool_create(2, err, sizeof(err));
+  assert_non_null(pool);
+  nds_model nm;
+  nds_test_build(&nm, 0.001, NULL);
+  nds_fit_cfg cfg;
+  nds_fit_cfg_default(&cfg);
+  cfg.pop = 16;
+  cfg.iters = 1;
+  cfg.seed = 11;
+  cfg.fit[ND_TH_ROLL] = 0;
+  nd_rng r;
+  nd_rng_seed(&r, 1, 7);
+  nds_fit_paper_prior(nd_theta_true, 1.0, cfg.lower, &r, cfg.mu0, cfg.sigma0);
+  cfg.mu0[ND_TH_MASS] = 1.0;
+  cfg.mu0[ND_TH_ROLL] = nd_theta_true[ND_TH_ROLL];
+  cfg.lm_iters = 12;
+  nds_fit *f = nds_fit_create(&nm, &cfg, pool, err, sizeof(err));
+  assert_non_null(f);
+  nds_fit_out out;
+  assert_int_equal(nds_fit_run(f, push, NPUSH, &out, err, sizeof(err)), 0);
+  printf("CEM Q 16 C 1 + LM %d iterations: sliding %.5f +- %.1e, torsional %.6f +- %.1e (%d "
+         "replays, of them LM %d; |r|^2 %.3e -> %.3e, inflation %.1f)\n", out.lm_iters,
+         out.mean[0], out.lm_std[0], out.mean[1], out.lm_std[1], out.replays, out.lm_replays,
+         out.lm_cost0, out.lm_cost, out.lm_inflation);
+  assert_true(out.lm_run);
+  assert_true(out.lm_cost < 1e-3 * out.lm_cost0);
+  assert_near(out.mean[ND_TH_SLIDE], 1.0, 0.01);
+  assert_near(out.mean[ND_TH_TORSION], nd_theta_true[ND_TH_TORSION], 2e-4);
+  assert_true(isfinite(out.lm_std[ND_TH_SLIDE]) && out.lm_std[ND_TH_SLIDE] >= 0);
+  assert_near(out.lm_std[ND_TH_MASS], 0, 0);
+  assert_true(out.lm_replays <= (12 + 1) * 3 * NPUSH);
+  double m[ND_NTHETA], sd[ND_NTHETA];
+  nds_fit_dist(f, m, sd);
+  assert_memory_equal(m, out.mean, sizeof(m));
+  assert_near(sd[ND_TH_SLIDE], out.std[ND_TH_SLIDE], 0);
+  nds_fit_free(f);
+
+  cfg.lm_iters = 99;
+  assert_null(nds_fit_create(&nm, &cfg, pool, err, sizeof(err)));
+  assert_non_null(strstr(err, "lm_iters"));
+  nds_model_free(&nm);
+  nd_pool_free(pool);
+}
+
 /* Short copies of the pushes, for the cheaper fit tests. */
 static void short_buffer(nd_rollout *rs, int n, int steps) {
   for (int i = 0; i < n; i++) {
@@ -921,6 +971,7 @@ int main(void) {
       cmocka_unit_test(test_replay_bad_records),
       cmocka_unit_test(test_torsion_landscape),
       cmocka_unit_test(test_fit_recovers_sliding),
+      cmocka_unit_test(test_fit_refine),
       cmocka_unit_test(test_fit_workers_identical),
       cmocka_unit_test(test_fit_flat_no_contact),
       cmocka_unit_test(test_fit_bad_config),
