@@ -123,7 +123,13 @@ pt_check "the recorder recorded the 3 tasks run through the injections ($nrec)" 
 # refused and counted by the executor and the bridge, and the robot must stay where it is.
 # Its measured position comes from a log of ROBOT_STATE kept for these few seconds only.
 # The further task below shows that plans inside the box are still followed.
-sleep "$(pt_slow 0.5)"   # the last task's plans have gone stale: the executor holds
+# The last task's plans go stale and the executor brakes to a hold (plans may start up to
+# a planning time after they arrive, so a fixed wait was too short on a loaded machine);
+# then the sphere settles on the held setpoint.
+t_hold=$(pt_now_us)
+pt_wait_for "$(pt_slow 5)" pt_lc status "$LOG" nudge-executor --after-utime "$t_hold" --state holding ||
+  pt_fail "the executor did not come to a hold after the tasks"
+sleep "$(pt_slow 0.2)"
 RS_LOG=$PT_WORK/ws-state.lcmlog
 pt_spawn rs_logger lcm-logger -q -f -c '^ROBOT_STATE$' "$RS_LOG"
 pt_wait_for 5 test -e "$RS_LOG" || pt_fail "lcm-logger (ROBOT_STATE) did not start"
