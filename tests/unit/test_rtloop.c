@@ -360,6 +360,15 @@ static void post_state(double now, const double p[2]) {
   nd_mailbox_post(&g_io.state, &in, (int)sizeof in);
 }
 
+/* A plan received 0.2 ms before now, sent at utime - 200 us, starting on arrival; the
+ * caller fills in what it is. */
+static exec_loop_plan_in plan_now(double now, int64_t utime) {
+  exec_loop_plan_in pl = {0};
+  pl.t_arrive = now - 2e-4;
+  pl.utime = utime - 200;
+  return pl;
+}
+
 /* The next EE_CMD the loop left in the ring (other messages skipped): 1, or 0 when none. */
 static int pop_ee_cmd(nudge_ee_cmd_t *m) {
   unsigned char buf[ND_RTIO_MAX];
@@ -393,9 +402,7 @@ static void test_resent_plan_after_restart(void **state) {
     const double now = T0 + DT * (double)k;
     const int64_t utime = U0 + 1000 * k;
     post_state(now, p);
-    exec_loop_plan_in pl = {0};
-    pl.t_arrive = now - 2e-4;
-    pl.utime = utime - 200;
+    exec_loop_plan_in pl = plan_now(now, utime);
     if (k < DEAD && k % 50 == 0) {
       /* The first planner: a new keypoint every plan, the robot moving. */
       pl.plan_id = 100 + k / 50;
@@ -477,9 +484,7 @@ static void test_plan_start(void **state) {
     const double now = T0 + DT * (double)k;
     const int64_t utime = U0 + 1000 * k;
     post_state(now, p);
-    exec_loop_plan_in pl = {0};
-    pl.t_arrive = now - 2e-4;
-    pl.utime = utime - 200;
+    exec_loop_plan_in pl = plan_now(now, utime);
     pl.M = 1;
     if (k == 1) {
       pl.plan_id = 1, pl.T = 0.3, pl.t_start = pl.t_arrive;
