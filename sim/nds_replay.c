@@ -235,6 +235,7 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
   int cut = 0;
   nds_ctrl pid;
   nds_ctrl_reset(&pid);
+  nds_ctrl_for_mass(&pid, m->body_mass[nm->ee_body]);
   const double mdt = m->opt.timestep;
   const long W = window_steps(cfg, mdt);
   /* The robust score's windows are the re-anchoring ones (the whole replay is one when not
@@ -268,7 +269,7 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
       u[0] /= k;
       u[1] /= k;
       if (mode == NDS_REPLAY_FORCE) f[0] = u[0], f[1] = u[1];
-      else nds_ctrl_vel(ctrl, u, vel, f);
+      else nds_ctrl_vel(ctrl, &pid, u, vel, f);
     }
     d->qfrc_applied[dof0] = f[0];
     d->qfrc_applied[dof1] = f[1];

@@ -541,9 +541,21 @@ static void test_ctrl(void **state) {
   assert_true(isnan(f[0]));
 
   const double vref[2] = {0.3, -10};
-  nds_ctrl_vel(&cfg, vref, vel, f);
+  nds_ctrl_vel(&cfg, &c, vref, vel, f);
   assert_near(f[0], cfg.kv * 0.25, 1e-12);
   assert_near(f[1], -cfg.f_max, 0);
+
+  /* A sphere of 3 kg: every force and the bound three times as large. */
+  double f1[2];
+  nds_ctrl_reset(&c);
+  nds_ctrl_pid(&cfg, &c, sp, pos, vel, dt, f1);
+  nds_ctrl_reset(&c);
+  nds_ctrl_for_mass(&c, 3.0 * NDS_CTRL_M_REF);
+  nds_ctrl_pid(&cfg, &c, sp, pos, vel, dt, f);
+  assert_near(f[0], 3.0 * f1[0], 1e-9 * fabs(f1[0]));
+  nds_ctrl_vel(&cfg, &c, vref, vel, f);
+  assert_near(f[0], 3.0 * cfg.kv * 0.25, 1e-12);
+  assert_near(f[1], -3.0 * cfg.f_max, 0);
 }
 
 /* The stability claim of the default gains, on the controller alone: a point mass under

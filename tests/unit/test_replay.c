@@ -412,7 +412,8 @@ static void test_replay_velocity(void **state) {
   nds_replay_terms t1, t2;
   char err[256];
   assert_int_equal(nds_replay(&nm, d, &rc, &r, &t1, pred, err, sizeof(err)), 0);
-  /* v_k = v (1 - (1 - a)^k), a = kv dt / m; x_N = x_0 + dt sum_{k=1..N} v_k. */
+  /* v_k = v (1 - (1 - a)^k), a = kv dt / m_ref (the gain scales with the mass m);
+   * x_N = x_0 + dt sum_{k=1..N} v_k. */
   double a = rc.ctrl.kv * dt / 1.0, x = ee[0], vk = 0;
   for (int k = 0; k < n; k++) {
     vk += a * (v - vk);
@@ -427,7 +428,9 @@ static void test_replay_velocity(void **state) {
   assert_int_equal(nds_theta_apply(&nm, heavy, err, sizeof(err)), 0);
   assert_int_equal(nds_replay(&nm, d, &rc, &r, &t2, NULL, err, sizeof(err)), 0);
   printf("velocity_replay_pos_ee mass1 %.3e mass2 %.3e m^2\n", t1.pos_ee, t2.pos_ee);
-  assert_true(t2.pos_ee > 2 * t1.pos_ee);
+  /* The gains scale with the sphere's mass (nds_ctrl_for_mass): in free space a heavier
+   * sphere tracks alike; only what it pushes feels its mass. */
+  assert_near(t2.pos_ee, t1.pos_ee, 1e-9 * t1.pos_ee);
   assert_true(t1.pos_o < 1e-20);  /* the box was never touched */
   rec_free(&r);
   mj_deleteData(d);
