@@ -23,7 +23,8 @@ int main(int argc, char **argv) {
   double tau_max = cfg.tau;
   for (int i = 0; i < cfg.n; i++) tau_max = fmax(tau_max, cfg.goals[i].tau);
   if (cfg.record) {
-    if (tasks_buffer_open(&buf, cfg.record, tau_max, cfg.record_dt, cfg.theta, err, sizeof(err))) {
+    if (tasks_buffer_open(&buf, cfg.record, tau_max, cfg.record_dt, cfg.record_control,
+                          cfg.theta, err, sizeof(err))) {
       fprintf(stderr, PROG ": --record %s\n", err);
       tasks_buffer_close(&buf);
       return 1;

@@ -28,6 +28,8 @@ static const nd_goal chain_lab[] = {
     {.x = 0.14, .y = -0.04, .yaw = -0.3},
 };
 static const char *const world_words[] = {"ideal", "lab", NULL};
+static const char *const control_words[] = {"force", "velocity", NULL};
+_Static_assert(ND_CTRL_FORCE == 0 && ND_CTRL_VELOCITY == 1, "control_words follow ND_CTRL_*");
 
 static int add_goal(const char *v, const char *what, void *dst, char *err, int errlen) {
   tasks_cfg *c = dst;
@@ -91,6 +93,11 @@ int tasks_options(int argc, char **argv, tasks_cfg *c) {
       {"record-dt", ND_OPT_DOUBLE, &c->record_dt, 1e-5, 0.05, .arg = "S",
        .help = "the robot's control step, s (the bridge's 1/--rate); a task whose ROBOT_STATE "
                "period differs is not recorded"},
+      {"record-control", ND_OPT_CHOICE, &c->record_control, .choices = control_words,
+       .arg = "KIND", .def = "force",
+       .help = "what --record keeps as each step's control: the robot's force (ROBOT_STATE "
+               "ee_force, for nudge-adapter --replay-mode force) or its end-effector velocity "
+               "(ee_vel, for --replay-mode velocity: a robot's force estimate is poor)"},
       {"theta", ND_OPT_THETA, c->theta, .def = "the simulation's ground truth, as the planner",
        .help = "theta recorded as the planner's until PARAMS arrives"},
       {"await-fit", ND_OPT_DOUBLE, &c->await_fit, 0.0, 3600.0, .arg = "S",

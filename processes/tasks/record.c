@@ -27,9 +27,10 @@ static void say_repaired(const char *path, const nd_rfile_tail *repair) {
 /* Allocate the recorder for tasks of up to tau s at step dt and open the buffer (a second
  * writer is refused by its lock). A file system that refuses writes now (storage_error) is
  * reported and leaves the buffer closed for the appends to retry. */
-int tasks_buffer_open(tasks_buffer *b, const char *path, double tau, double dt,
+int tasks_buffer_open(tasks_buffer *b, const char *path, double tau, double dt, int control,
                       const double theta[ND_NTHETA], char *err, int errlen) {
   memset(b, 0, sizeof(*b));
+  b->control = control;
   b->w.fd = -1;
   memcpy(b->theta, theta, sizeof(b->theta));
   b->theta_version = -1;
@@ -82,7 +83,7 @@ void tasks_buffer_begin(tasks_buffer *b, const nudge_mocap_t *m, int64_t id, con
   memcpy(pose + 3, m->obj_quat, 4 * sizeof(double));
   const double goal[3] = {g->x, g->y, g->yaw};
   nd_recorder_begin(&b->rec, b->have_rs ? &b->rs : NULL, m->utime, pose, id, goal, b->theta,
-                    ND_CTRL_FORCE);
+                    b->control);
 }
 
 /* Stop recording the task and append it with outcome (ND_OUTCOME_*), or say why not. A

@@ -43,6 +43,7 @@ typedef struct {
   const char *url;
   const char *record;            /* replay buffer to append to; NULL: no recording */
   double record_dt;              /* the robot's control step, s */
+  int record_control;            /* ND_CTRL_FORCE or ND_CTRL_VELOCITY: what u records */
   double theta[ND_NTHETA];       /* recorded as the planner's theta until PARAMS arrives */
   double await_fit;              /* s to wait for the adapter's refit after a record; 0 none */
   nd_goal goals[MAX_GOALS];
@@ -56,6 +57,7 @@ typedef struct {
   nd_rec_state rs;       /* the newest robot state, kept across tasks */
   int have_rs;
   double theta[ND_NTHETA];
+  int control;           /* ND_CTRL_*: the robot state's force or velocity as u */
   int64_t theta_version; /* -1: --theta */
   int32_t params_n;      /* rollouts the newest PARAMS was fitted on */
   int64_t appended;
@@ -116,7 +118,7 @@ int tasks_options(int argc, char **argv, tasks_cfg *c);
 int tasks_subscribe(tasks_io *io, lcm_t *lcm, char *err, int errlen);
 
 /* record.c */
-int tasks_buffer_open(tasks_buffer *b, const char *path, double tau, double dt,
+int tasks_buffer_open(tasks_buffer *b, const char *path, double tau, double dt, int control,
                       const double theta[ND_NTHETA], char *err, int errlen);
 void tasks_buffer_close(tasks_buffer *b);
 void tasks_buffer_begin(tasks_buffer *b, const nudge_mocap_t *m, int64_t id, const nd_goal *g);
