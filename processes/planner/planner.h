@@ -41,6 +41,9 @@ typedef struct {
 #define PLANNER_LEAD_MARGIN 0.004
 #define PLANNER_PRE_MAX 256
 
+/* Niceness the planning threads add to the process's: below its LCM receive thread. */
+#define PLANNER_COMPUTE_NICE 5
+
 /* The process's mutable state, owned by the main thread (LCM handlers run inside
  * lcm_handle on it, never during a plan). */
 typedef struct {
