@@ -20,9 +20,8 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
   memcpy(o->theta, nd_theta_true, sizeof(o->theta));
   memcpy(o->ref, nd_theta_true, sizeof(o->ref));
   o->D = 1.0, o->seed = 1, o->nice = 10;
-  /* The recorded step: a coarser replay model biased the live fits (sliding friction
-   * 0.94-0.96 and torsional 0.0017-0.0042 against 0.99-1.01 and 0.0045-0.0048 at 1 ms,
-   * started at the truth), at about twice the refit time (doc/decisions.md#live-bias). */
+  /* The recorded step: a coarser replay model biases the fit, whatever it saves in time
+   * (doc/decisions.md#live-bias). */
   o->replay_dt = 0.001;
   o->replay_mode = fc->replay.mode;
   o->replay_window = NDS_FIT_WINDOW_MOCAP;

@@ -110,8 +110,7 @@ int main(int argc, char **argv) {
   }
   /* LCM first: its receive thread keeps the process's priority. Then the planning threads
    * (this one and the pool's, which inherit it) step below it, so a plan that runs long on
-   * a loaded machine never starves the socket (lost input showed as rejections never
-   * counted under the sanitizers). Linux's nice is per thread. */
+   * a loaded machine never starves the socket. Linux's nice is per thread. */
   if (!(p.lcm = ndp_lcm_create(o.url, err, sizeof(err))) || planner_subscribe(&p, err, sizeof(err)))
     goto done;
   errno = 0;
