@@ -5,6 +5,7 @@
  *   watch.c   the replay buffer: reading what was appended, skipping bad records
  *   fitter.c  the fit thread: one nds_fit_run per job
  *   params.c  a finished fit: the next version, the history, PARAMS
+ *   score.c   --score: one replay of the whole buffer at a given theta, no LCM
  *
  * The adapter watches the replay buffer the task runner appends to. Whenever complete
  * rollouts beyond those of the last fit are there, it refits theta on all of them
@@ -42,6 +43,7 @@ typedef struct {
   int replay_mode;            /* NDS_REPLAY_* */
   double replay_window;       /* s */
   double robust;              /* m^2: CEM ranks by the robust score; 0: by L (nds_fit.h) */
+  double score[ND_NTHETA];    /* --score: theta to evaluate; NAN: watch and refit */
 } adapter_opts;
 
 /* The fit thread's job and result. Fields under mu. */
@@ -98,6 +100,10 @@ typedef struct {
 /* options.c: parse argv into o and the fit's configuration fc. ND_OPT_RUN, or the exit
  * status (usage or refusal printed). */
 int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc);
+
+/* score.c: L(o->score) on every rollout of o->buffer, printed as 'name value unit'
+ * lines; the exit status (0, 1 unreadable or failed). */
+int adapter_score(const adapter_opts *o, const nds_fit_cfg *fc);
 
 /* watch.c */
 void adapter_poll(adapter *a);            /* read what was appended (no fit running) */

@@ -25,6 +25,7 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
   o->replay_dt = 0.001;
   o->replay_mode = fc->replay.mode;
   o->replay_window = NDS_FIT_WINDOW_MOCAP;
+  for (int i = 0; i < ND_NTHETA; i++) o->score[i] = NAN;
   nd_opt opts[] = {
       {"buffer", ND_OPT_STRING, &o->buffer, .arg = "FILE",
        .help = "replay buffer to watch (need not exist yet)"},
@@ -59,6 +60,11 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
       {"robust", ND_OPT_DOUBLE, &o->robust, 0, 1, .arg = "S",
        .help = "rank candidates by the replay windows' robust score of scale S m^2 (0: by L, "
                "the paper's)"},
+      {"score", ND_OPT_THETA, o->score, .def = "off",
+       .help = "do not watch: replay every rollout of the buffer once at this theta with the "
+               "replay options above, print its loss L and L's terms summed over the rollouts "
+               "as 'name value unit' lines and exit (a validation loss on held-out rollouts, "
+               "as nudge-study uses it)"},
       {"seed", ND_OPT_U64, &o->seed, .help = "CEM seed (a restart adds the history's version)"},
       {"lcm-url", ND_OPT_STRING, &o->url, .arg = "URL", .def = "$LCM_DEFAULT_URL, else " NDP_DEFAULT_URL,
        .help = "LCM URL"},
@@ -71,9 +77,9 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
                       "appends the fit to the parameter history. PARAMS is republished at 1 Hz. "
                       "A restarted adapter goes on from its history: version numbers and the "
                       "CEM distribution continue.",
-                      "stdout: one line per refit. Exit status: 0 after SIGINT/SIGTERM, 1 on a "
-                      "runtime failure\n(history locked by another adapter, unreadable), 2 on "
-                      "bad arguments.\n", opts, sizeof(opts) / sizeof(opts[0])};
+                      "stdout: one line per refit (--score: its figures). Exit status: 0 after "
+                      "SIGINT/SIGTERM (--score: scored), 1 on a runtime failure\n(history "
+                      "locked by another adapter, unreadable), 2 on bad arguments.\n", opts, sizeof(opts) / sizeof(opts[0])};
   int rc = nd_opt_parse(&spec, argc, argv);
   if (rc != ND_OPT_RUN) return rc;
   if (!o->buffer) return nd_opt_fail(&spec, "--buffer FILE is required");
