@@ -35,7 +35,7 @@
 extern const nd_goal exp_train_goals[NTRAIN];
 
 typedef struct {
-  int runs, episodes, threads, pop, iters, neval, mode, force, quick, landscape;
+  int runs, episodes, threads, pop, iters, neval, mode, force, quick, landscape, draws;
   double tau, plan_dt, window;
   double step_std, step_gate, rel_floor, k2, robust;  /* the fit's (nds_fit_cfg) */
   uint64_t seed;
@@ -77,6 +77,13 @@ void exp_study_free(exp_study *s);
 int exp_record_truth(exp_study *s, const nd_goal *g, int n, uint64_t kind, nd_rollout *rs,
                      const char *path, char *err, int errlen);
 int exp_study_run(const exp_opts *o, int argc, char **argv);
+/* The initial mean (mass at the truth) and std of run `run` at prior width D: the paper's
+ * draw, seeded from --seed, D and the run only. */
+uint64_t exp_dkey(double D);
+void exp_draw(const exp_opts *o, double D, int run, double lower, double mu0[ND_NTHETA],
+              double sigma0[ND_NTHETA]);
+/* --draws: "D run S,T,R,M" per run and D on stdout, the means the study starts from. */
+int exp_draws_print(const exp_opts *o);
 
 /* report.c */
 void exp_path(char *buf, size_t cap, const char *dir, const char *name);

@@ -123,6 +123,9 @@ int main(int argc, char **argv) {
       {"quick", ND_OPT_FLAG, &o.quick,
        .help = "a preset for a first look, under 10 min on 2 cores: --runs 3 --episodes 4 "
                "--pop 32 --iters 2 --tau 3 (explicit options win)"},
+      {"draws", ND_OPT_FLAG, &o.draws,
+       .help = "print each run's initial theta as 'D run S,T,R,M' lines and exit (no --out): "
+               "the live study, nudge-study, starts its runs from the same draws"},
       {"landscape", ND_OPT_FLAG, &o.landscape,
        .help = "instead of the study: record the 10 training tasks with the true theta and "
                "write DIR/landscape.csv, the loss along each friction for both replay modes "
@@ -137,8 +140,9 @@ int main(int argc, char **argv) {
                       epilog, opts, sizeof(opts) / sizeof(opts[0])};
   const int rc = nd_opt_parse(&spec, argc, argv);
   if (rc != ND_OPT_RUN) return rc;
-  if (!o.out) return nd_opt_fail(&spec, "--out DIR is required");
   o.mode = replay_modes[replay];
+  if (o.draws) return exp_draws_print(&o);
+  if (!o.out) return nd_opt_fail(&spec, "--out DIR is required");
   if (o.quick) { /* the preset, explicit values over it */
     if (!nd_opt_find(&spec, "runs")->given) o.runs = 3;
     if (!nd_opt_find(&spec, "episodes")->given) o.episodes = 4;

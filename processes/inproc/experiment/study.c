@@ -191,6 +191,34 @@ static int truth_band(exp_study *s, char *err, int errlen) {
   return 0;
 }
 
+/* D's bits: seeds come from D's value, not its place in --d, so "--d 1" repeats the
+ * D = 1 runs of the default "--d 0.2,1.0" exactly. */
+uint64_t exp_dkey(double D) {
+  uint64_t k;
+  memcpy(&k, &D, sizeof(k));
+  return k;
+}
+
+void exp_draw(const exp_opts *o, double D, int run, double lower, double mu0[ND_NTHETA],
+              double sigma0[ND_NTHETA]) {
+  nd_rng rr;
+  nd_rng_seed(&rr, o->seed, exp_mix(0, 1, exp_dkey(D), (uint64_t)run));
+  nds_fit_paper_prior(nd_theta_true, D, lower, &rr, mu0, sigma0);
+  mu0[ND_TH_MASS] = nd_theta_true[ND_TH_MASS];
+}
+
+int exp_draws_print(const exp_opts *o) {
+  nds_fit_cfg fc;
+  exp_fit_cfg(o, o->mode, &fc);
+  for (int di = 0; di < o->nD; di++)
+    for (int run = 0; run < o->runs; run++) {
+      double mu0[ND_NTHETA], sg0[ND_NTHETA];
+      exp_draw(o, o->D[di], run, fc.lower, mu0, sg0);
+      printf("%g %d %.9g,%.9g,%.9g,%.9g\n", o->D[di], run, mu0[0], mu0[1], mu0[2], mu0[3]);
+    }
+  return 0;
+}
+
 static int run_one(exp_study *s, int di, int run, exp_row *rows, char *err, int errlen) {
   const exp_opts *o = s->o;
   const double D = o->D[di];
@@ -198,15 +226,8 @@ static int run_one(exp_study *s, int di, int run, exp_row *rows, char *err, int 
   exp_dname(D, dn, sizeof(dn));
   nds_fit_cfg fc;
   exp_fit_cfg(o, o->mode, &fc);
-  /* Seeds from D's value, not its place in --d: "--d 1" repeats the D = 1 runs of the
-   * default "--d 0.2,1.0" exactly. */
-  uint64_t dkey;
-  memcpy(&dkey, &D, sizeof(dkey));
-  fc.seed = exp_mix(o->seed, 4, dkey, (uint64_t)run);
-  nd_rng rr;
-  nd_rng_seed(&rr, o->seed, exp_mix(0, 1, dkey, (uint64_t)run));
-  nds_fit_paper_prior(nd_theta_true, D, fc.lower, &rr, fc.mu0, fc.sigma0);
-  fc.mu0[ND_TH_MASS] = nd_theta_true[ND_TH_MASS];
+  fc.seed = exp_mix(o->seed, 4, exp_dkey(D), (uint64_t)run);
+  exp_draw(o, D, run, fc.lower, fc.mu0, fc.sigma0);
   nds_fit *fit = nds_fit_create(&s->fitm, &fc, s->su.pool, err, errlen);
   if (!fit) return -1;
 
@@ -240,7 +261,7 @@ static int run_one(exp_study *s, int di, int run, exp_row *rows, char *err, int 
     exp_row *r = exp_row_at(rows, o, di, run, ep);
     const nd_goal *g = &exp_train_goals[(ep - 1) % NTRAIN];
     nds_episode_out eo;
-    if (run_task(s, mean, exp_mix(o->seed, 2, dkey ^ (uint64_t)run, (uint64_t)ep),
+    if (run_task(s, mean, exp_mix(o->seed, 2, exp_dkey(D) ^ (uint64_t)run, (uint64_t)ep),
                  g, 1, ep, &eo, err, errlen) ||
         nd_rbuf_append(&w, &s->rec.r, err, errlen))
       goto done;
