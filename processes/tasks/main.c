@@ -72,7 +72,7 @@ int main(int argc, char **argv) {
     plans += r.plans;
     obj_path += r.obj_path;
     ee_path += r.ee_path;
-    if (i + 1 < cfg.n && tasks_pause(lcm, &io, &cfg, rejected, err, sizeof(err))) goto done;
+    if (tasks_pause(lcm, &io, &cfg, rejected, i + 1 == cfg.n, err, sizeof(err))) goto done;
   }
   io.st.state = "done";
   ndp_status_tick(lcm, &io.st, 1);

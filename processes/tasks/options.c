@@ -102,7 +102,8 @@ int tasks_options(int argc, char **argv, tasks_cfg *c) {
        .help = "theta recorded as the planner's until PARAMS arrives"},
       {"await-fit", ND_OPT_DOUBLE, &c->await_fit, 0.0, 3600.0, .arg = "S",
        .help = "with --record: after appending a task, wait up to S s for PARAMS fitted on it "
-               "before the next task (the paper's protocol: refit between episodes); 0: no wait"},
+               "before going on (the paper's protocol: refit between episodes), after the last "
+               "task too; 0: no wait"},
       {"lcm-url", ND_OPT_STRING, &c->url, .arg = "URL", .def = "$LCM_DEFAULT_URL, else " NDP_DEFAULT_URL,
        .help = "LCM URL"},
   };

@@ -201,10 +201,11 @@ void tasks_print(int i, int n, const nd_goal *g, const tasks_result *r) {
 }
 
 
-/* Between tasks: with --await-fit, wait for PARAMS fitted on the record just appended (the
- * paper's task -> append -> refit protocol; the adapter's count may stay below ours if it
- * refused a record, hence the limit); then let the object come to rest. */
-int tasks_pause(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, int rejected, char *err,
+/* After a task: with --await-fit, wait for PARAMS fitted on the record just appended (the
+ * paper's task -> append -> refit protocol, after the last task too, so a caller's next
+ * run starts on the refit; the adapter's count may stay below ours if it refused a record,
+ * hence the limit); then, unless it was the last, let the object come to rest. */
+int tasks_pause(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, int rejected, int last, char *err,
                 int errlen) {
   tasks_buffer *b = io->buf;
   if (c->await_fit > 0 && b && b->last_ok) {
@@ -219,7 +220,7 @@ int tasks_pause(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, int rejected, char
       fprintf(stderr, PROG ": no PARAMS fitted on %lld rollouts within %g s; going on\n",
               (long long)b->w.records, c->await_fit);
   }
-  if (rejected) return 0;
+  if (rejected || last) return 0;
   io->st.state = "settling";
   const double t_end = ndp_mono() + c->settle;
   while (!ndp_quit && ndp_mono() < t_end)

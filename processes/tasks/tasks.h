@@ -132,7 +132,8 @@ int tasks_run(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, const nd_goal *g, in
 void tasks_print(int i, int n, const nd_goal *g, const tasks_result *r);
 /* What a ROBOT_STATE reflex code names: "joint 4 velocity", "Cartesian jerk". */
 const char *tasks_reflex_name(int reflex, int joint);
-int tasks_pause(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, int rejected, char *err,
+/* After task i: await the fit of its record (--await-fit), then settle unless last. */
+int tasks_pause(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, int rejected, int last, char *err,
                 int errlen);
 
 #endif
