@@ -1,0 +1,87 @@
+#!/usr/bin/env bash
+# test_study: nudge-study, the live study, on the real processes.
+#
+#   netns-run bash test_study.sh BUILD_DIR
+#
+# 1. Bad arguments are refused with status 2 and a message naming the input, before
+#    anything starts; a results directory that holds a study is refused (status 1).
+# 2. One run of two episodes from sliding and torsional friction half the truth's: every episode's row
+#    is there with the fit it evaluated (versions 0, 1, 2 on 0, 1, 2 rollouts), the
+#    buffers hold the two training pushes and the five held-out evaluation tasks, the
+#    validation loss was scored for each row, the sliding error at episode 2 is below half
+#    the starting 50 %, the validation loss fell, and the summary lines, summary.csv and
+#    (with gnuplot) both figures are written.
+set -u
+PT_NAME=test_study
+PT_NO_LOGGER=1
+. "$(dirname "${BASH_SOURCE[0]}")/../tools/process-lib.sh"
+pt_init "$@"
+STUDY=$PT_BIN/nudge-study
+[[ -x $STUDY ]] || { echo "$PT_NAME: $STUDY is missing: build first" >&2; exit 1; }
+
+# refused CODE WORD ARGS...: nudge-study ARGS exits CODE and its stderr names WORD.
+refused() {
+  local code=$1 word=$2 rc
+  shift 2
+  "$STUDY" "$@" >/dev/null 2>"$PT_WORK/refused.err"
+  rc=$?
+  if ((rc == code)) && grep -q -- "$word" "$PT_WORK/refused.err"; then
+    pt_ok "nudge-study $* -> status $code naming $word"
+  else
+    pt_fail "nudge-study $* -> status $rc (want $code), stderr: $(head -c 300 "$PT_WORK/refused.err")"
+  fi
+}
+
+# --- 1. bad arguments --------------------------------------------------------------------
+refused 2 "--out" --runs 1
+refused 2 "--world" --out "$PT_WORK/x" --world moon
+refused 2 "--runs" --out "$PT_WORK/x" --runs 0
+refused 2 "--episodes" --out "$PT_WORK/x" --episodes 1
+refused 2 "--theta" --out "$PT_WORK/x" --theta 1,2,3
+refused 2 "--replay-mode" --out "$PT_WORK/x" --replay-mode setpoint
+refused 2 "eps" --out "$PT_WORK/x" --eps 7
+pt_check_not "nothing was started or written for refused arguments" test -e "$PT_WORK/x/config.txt"
+
+# --- 2. one run, two episodes ------------------------------------------------------------
+OUT=$PT_WORK/study
+"$STUDY" --out "$OUT" --runs 1 --episodes 2 --theta 0.5,0.0025,0.0001,1 \
+  --await-fit "$(pt_slow 60)" --tau "$(pt_slow 5)" >"$PT_WORK/study.out" 2>"$PT_WORK/study.err"
+rc=$?
+cat "$PT_WORK/study.out"
+pt_check "nudge-study exits 0 (got $rc)" test "$rc" -eq 0
+CSV=$OUT/run_0.csv
+col() { awk -F, -v e="$1" -v c="$2" 'NR > 1 && $1 == e { print $c }' "$CSV"; }
+pt_check "run_0.csv: a header and 3 rows of 20 columns" \
+  awk -F, 'NF != 20 { bad = 1 } END { exit bad || NR != 4 }' "$CSV"
+pt_check "versions 0, 1, 2 fitted on 0, 1, 2 rollouts" \
+  test "$(col 0 2)$(col 1 2)$(col 2 2)/$(col 0 3)$(col 1 3)$(col 2 3)" = "012/012"
+pt_check "every row has a positive validation loss" \
+  awk -F, 'NR > 1 && !($13 > 0) { bad = 1 } END { exit bad }' "$CSV"
+s0=$(col 0 4) s2=$(col 2 4)
+pt_figure study_sliding_ep2 "$s2" ratio
+pt_check "the run started at sliding friction 0.5 (got $s0)" test "$s0" = 0.5
+pt_check "sliding error at episode 2 below 25 % (got $s2)" \
+  awk -v s="$s2" 'BEGIN { e = s - 1; if (e < 0) e = -e; exit !(s != "" && e < 0.25) }'
+pt_val n_train buffer "$OUT/run_0/train.nrb" records_in_file
+pt_val n_val buffer "$OUT/run_0/val.nrb" records_in_file
+pt_check "train.nrb holds the 2 training pushes (got $n_train)" test "$n_train" = 2
+pt_check "val.nrb holds the 5 held-out evaluation tasks (got $n_val)" test "$n_val" = 5
+fig() { awk -v n="$1" '$1 == n { print $2 }' "$PT_WORK/study.out"; }
+for f in eval_success_ep0 eval_success_ep2 eval_success_last eval_time_ratio_ep2 \
+  eval_time_ratio_last val_loss_ratio_ep2 reflex_stops runs_sliding_within5pct_ep2 \
+  torsional_err_drop_pct_last sliding_err_pct_max; do
+  pt_check "summary line $f ($(fig "$f"))" test -n "$(fig "$f")"
+done
+pt_check "val_loss_ratio_ep2 below 1 ($(fig val_loss_ratio_ep2))" \
+  awk -v v="$(fig val_loss_ratio_ep2)" 'BEGIN { exit !(v != "" && v < 1) }'
+pt_check "summary.csv: a header and episodes 0..2" \
+  awk -F, 'END { exit !(NR == 4 && $1 == 2) }' "$OUT/summary.csv"
+if command -v gnuplot >/dev/null; then
+  for p in fig4_params fig5_performance; do
+    pt_check "$p.png is a PNG" bash -c '[[ $(head -c 8 "$1" | od -An -tx1 | tr -d " \n") == 89504e470d0a1a0a ]]' _ "$OUT/$p.png"
+  done
+fi
+refused 1 "holds results" --out "$OUT" --runs 1
+pt_sanitizer_scan "$OUT" || true
+((PT_FAILS)) && { tail -n 20 "$PT_WORK/study.err"; pt_dump_logs 2>/dev/null; }
+exit $((PT_FAILS > 0))
