@@ -28,7 +28,7 @@ void nd_lm_cfg_default(nd_lm_cfg *cfg) {
 }
 
 nd_lm *nd_lm_create(const nd_lm_cfg *c, char *err, int errlen) {
-  if (c->n < 1 || c->n > N_MAX || c->m < c->n + 1 || c->iters < 1 || !c->lower ||
+  if (c->n < 1 || c->n > N_MAX || c->m < c->n + 1 || c->iters < 0 || !c->lower ||
       !c->upper || !c->scale || !(c->fd_step > 0) || !(c->lambda0 > 0) || !(c->tol >= 0) ||
       c->stride < 0) {
     snprintf(err, errlen, "nd_lm: bad configuration (n %d, m %d, iters %d)", c->n, c->m,

@@ -21,7 +21,8 @@ typedef int (*nd_lm_fn)(void *ctx, const double *x, int k, double *r);
 
 typedef struct {
   int n, m;            /* parameters (1..16), residuals (>= n + 1) */
-  int iters;           /* most iterations (batches of n + 1 points) */
+  int iters;           /* most iterations (batches of n + 1 points); 0: the covariance at
+                          the start point only */
   const double *lower, *upper;  /* bounds, n each */
   const double *scale; /* n: a parameter's natural size (> 0) */
   double fd_step;      /* forward-difference step, in units of scale */

@@ -135,6 +135,13 @@ int nds_fit_run(nds_fit *f, const nd_rollout *rs, int n, nds_fit_out *out, char 
 int nds_fit_loss(nds_fit *f, const double theta[ND_NTHETA], const nd_rollout *rs, int n,
                  double *loss, nds_replay_terms *per, char *err, int errlen);
 
+/* The standard errors of the fitted entries of theta on rs[0, n) (held ones 0; NaN if
+ * the replays do not determine them), from the replay residuals' Jacobian at theta, one
+ * batch of nfit + 1 replays of the buffer (the refinement's covariance, no step). Return
+ * 0, or -1 with a message. */
+int nds_fit_cov(nds_fit *f, const double theta[ND_NTHETA], const nd_rollout *rs, int n,
+                double std[ND_NTHETA], char *err, int errlen);
+
 /* nds_fit_loss, scored as CEM ranks a candidate: the robust score with cfg.robust > 0
  * (per[i].robust each rollout's), else L. */
 int nds_fit_score(nds_fit *f, const double theta[ND_NTHETA], const nd_rollout *rs, int n,

@@ -39,6 +39,11 @@ int adapter_score(const adapter_opts *o, const nds_fit_cfg *fc) {
   for (int i = 0; i < n; i++) po += per[i].pos_o, pe += per[i].pos_ee, ro += per[i].rot_o;
   printf("rollouts %d count\nloss_obj_pos %.6g m^2\nloss_ee_pos %.6g m^2\nloss_obj_rot %.6g rad\n"
          "loss %.6g m^2\n", n, po, pe, ro, L);
+  /* The fitted parameters' standard errors at this theta (nds_fit_cov). */
+  double sd[ND_NTHETA];
+  if (nds_fit_cov(fit, o->score, rs, n, sd, err, sizeof(err))) goto done;
+  for (int i = 0; i < ND_NTHETA; i++)
+    if (o->fit >> i & 1) printf("std_%s %.6g %s\n", nd_theta_key[i], sd[i], nd_theta_unit[i]);
   status = 0;
 done:
   if (status) fprintf(stderr, PROG ": --score: %s\n", err);

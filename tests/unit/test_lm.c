@@ -1,7 +1,8 @@
 /* test_lm: Levenberg-Marquardt with batched forward differences (core/nd_lm.c): it
  * converges on a curve fit from a far start within its iterations, keeps to its bounds, and
  * its 95 % intervals hold the truth about 95 % of the time, for white residuals and, with
- * the correlation correction, for correlated ones. */
+ * the correlation correction, for correlated ones. With no iterations it evaluates one batch
+ * and gives the covariance at the start point, which it leaves unchanged. */
 #include <string.h>
 
 #include "nd_test.h"
@@ -111,10 +112,36 @@ static void test_intervals(void **state) {
   assert_true(fixed >= 0.88);   /* the correction restores it */
 }
 
+/* iters 0: one batch of n + 1 points, x untouched, the covariance at x: at the truth the
+ * same standard errors as a converged fit's. */
+static void test_cov_only(void **state) {
+  (void)state;
+  static fit f;
+  nd_rng r;
+  nd_rng_seed(&r, 5, 0);
+  data(&f, &r, 0.02, 0.0);
+  nd_lm *fitter = make(0, 8), *cov = make(0, 0);
+  double xf[3] = {1.8, 1.3, 0.35}, x[3];
+  nd_lm_out of, oc;
+  char err[128];
+  assert_int_equal(nd_lm_run(fitter, residuals, &f, xf, &of, err, sizeof err), 0);
+  memcpy(x, xf, sizeof x);
+  f.points = 0;
+  assert_int_equal(nd_lm_run(cov, residuals, &f, x, &oc, err, sizeof err), 0);
+  assert_int_equal(f.points, 4);
+  assert_int_equal(oc.iters, 0);
+  assert_memory_equal(x, xf, sizeof x);
+  assert_true(oc.rank_ok);
+  for (int i = 0; i < 3; i++) assert_true(fabs(oc.std[i] / of.std[i] - 1) < 0.02);
+  nd_lm_free(fitter);
+  nd_lm_free(cov);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_converges),
       cmocka_unit_test(test_intervals),
+      cmocka_unit_test(test_cov_only),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

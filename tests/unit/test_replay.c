@@ -687,6 +687,18 @@ static void test_fit_refine(void **state) {
   nds_fit_dist(f, m, sd);
   assert_memory_equal(m, out.mean, sizeof(m));
   assert_near(sd[ND_TH_SLIDE], out.std[ND_TH_SLIDE], 0);
+  /* The covariance alone at the refined theta: the refinement's standard errors, the
+   * distribution untouched, held entries 0. */
+  double cov_sd[ND_NTHETA];
+  assert_int_equal(nds_fit_cov(f, out.mean, push, NPUSH, cov_sd, err, sizeof(err)), 0);
+  printf("nds_fit_cov at the refined theta: sliding +- %.2e, torsional +- %.2e\n", cov_sd[0],
+         cov_sd[1]);
+  for (int i = 0; i < 2; i++)
+    assert_true(cov_sd[i] > 0 && fabs(cov_sd[i] / out.lm_std[i] - 1) < 0.25);
+  assert_near(cov_sd[ND_TH_ROLL], 0, 0);
+  assert_near(cov_sd[ND_TH_MASS], 0, 0);
+  nds_fit_dist(f, m, sd);
+  assert_memory_equal(m, out.mean, sizeof(m));
   nds_fit_free(f);
 
   cfg.lm_iters = 99;
