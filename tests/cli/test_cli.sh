@@ -388,8 +388,8 @@ for p in bridge executor planner adapter tasks; do
   pt_check "nudge-$p runs with umask $u (o+w masked)" test $((8#$u & 2)) -eq 2
 done
 
-# --world lab gives the arm's box and limits, ahead of the user's own; a --workspace given
-# to nudge-up wins over the arm's box.
+# --world lab gives the arm's box and limits and the adapter's velocity replay with the
+# mass, ahead of the user's own; a --workspace given to nudge-up wins over the arm's box.
 rm -f "$W"/*.args
 "$FAKE/nudge-up" demo --world lab --lcm-url memq:// --log-dir "$W/logs-lab" --buffer "$W/lab.nrb" \
   --grace 2 --ready-timeout 5 --planner-arg --pop --planner-arg 16 >"$W/up-lab.out" 2>"$W/up-lab.err"
@@ -399,7 +399,8 @@ LAB=-0.15,-0.30,0.15,0.40
 args_are nudge-bridge --workspace "$LAB" --world lab
 args_are nudge-executor --workspace "$LAB" --v-max 0.5 --a-max 2.0
 args_are nudge-planner --workspace "$LAB" --v-max 0.45 --a-max 1.8 --segment-time 0.6 --arm panda --pop 16
-args_are nudge-tasks --record "$W/lab.nrb" --world lab
+args_are nudge-tasks --record "$W/lab.nrb" --world lab --record-control velocity
+args_are nudge-adapter --replay-mode velocity --fit slide,torsion,mass --buffer "$W/lab.nrb"
 rm -f "$W"/*.args
 "$FAKE/nudge-up" demo --world lab --workspace "$WS" --lcm-url memq:// --log-dir "$W/logs-lab2" \
   --buffer "$W/lab.nrb" --grace 2 --ready-timeout 5 >"$W/up-lab2.out" 2>"$W/up-lab2.err"
