@@ -220,6 +220,17 @@ bad nudge-experiment "--d|nan" --d nan
 bad nudge-experiment "--d|appears twice" --d 1,1
 bad nudge-experiment "--d|expected" --d 1,
 bad nudge-experiment "--out DIR is required" --runs 1
+# --draws: one "D run S,T,R,M" line per run, the same for the same seed, another for another,
+# each friction within the D = 1 range (0, 2 theta], the mass at the truth; no --out needed.
+d1=$("$BIN/nudge-experiment" --draws --d 1 --runs 3 --seed 4)
+d2=$("$BIN/nudge-experiment" --draws --d 1 --runs 3 --seed 4)
+d3=$("$BIN/nudge-experiment" --draws --d 1 --runs 3 --seed 5)
+pt_check "nudge-experiment --draws: 3 lines within D = 1 of the truth, mass 1" awk '
+  { split($3, t, ","); n++
+    if ($1 != 1 || $2 != n - 1 || !(t[1] > 0 && t[1] <= 2 && t[2] > 0 && t[2] <= 0.01 && t[4] == 1)) bad = 1 }
+  END { exit bad || n != 3 }' <<<"$d1"
+pt_check "nudge-experiment --draws: reproducible for a seed" test "$d1" = "$d2"
+pt_check "nudge-experiment --draws: another seed, other draws" test "$d1" != "$d3"
 [[ -z $(ls -A "$W" | grep -v -e '^out$' -e '^err$') ]] ||
   pt_fail "a refused program created files: $(ls -A "$W")"
 
