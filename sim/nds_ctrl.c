@@ -4,7 +4,7 @@
 #include "nd_snap.h"
 
 /* The rollout's Euler step integrates these forces explicitly (semi-implicit Euler). The
- * gains scale with the sphere's mass (nds_ctrl_for_mass), so per unit mass they are those
+ * gains scale with the sphere's mass (nds_ctrl_reset), so per unit mass they are those
  * of NDS_CTRL_M_REF = 1 kg whatever the mass, and the bounds are those of 1 kg at the
  * coarsest step, dt_max = 10 ms. With a = kp dt^2 / m and b = kd dt / m the discrete
  * error dynamics are stable iff b < 2 and a + 2 b < 4: kd = 20 gives b = 0.2, kp = 1000
@@ -23,13 +23,11 @@ void nds_ctrl_cfg_default(nds_ctrl_cfg *cfg) {
   cfg->kv = 100.0;
 }
 
-void nds_ctrl_reset(nds_ctrl *c) {
+void nds_ctrl_reset(nds_ctrl *c, double mass) {
   c->integ[0] = 0;
   c->integ[1] = 0;
-  c->gain = 1.0;
+  c->gain = mass / NDS_CTRL_M_REF;
 }
-
-void nds_ctrl_for_mass(nds_ctrl *c, double mass) { c->gain = mass / NDS_CTRL_M_REF; }
 
 /* Clamp that lets NaN through, so a bad input shows up as a bad force, not a saturated one. */
 static double clampf(double x, double lo, double hi) { return x > hi ? hi : x < lo ? lo : x; }

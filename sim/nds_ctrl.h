@@ -28,12 +28,9 @@ typedef struct {
   double gain;        /* sphere mass / NDS_CTRL_M_REF: every gain and the force bound */
 } nds_ctrl;
 
-/* Zero the controller's memory; gain 1. */
-void nds_ctrl_reset(nds_ctrl *c);
-
-/* The controller of a sphere of mass kg (> 0): gains and force bound scaled by
- * mass / NDS_CTRL_M_REF. Keeps the memory. */
-void nds_ctrl_for_mass(nds_ctrl *c, double mass);
+/* Zero the controller's memory and make it the controller of a sphere of mass kg (> 0):
+ * gains and force bound scaled by mass / NDS_CTRL_M_REF. */
+void nds_ctrl_reset(nds_ctrl *c, double mass);
 
 /* PID force f[2] toward setpoint sp[axis][p, v, a, j] from sphere position and velocity,
  * advancing the integral by dt. */

@@ -49,8 +49,7 @@ int nds_episode_run(const nds_model *world, mjData *d, nds_planner *planner,
   nd_exec ex;
   nd_exec_init(&ex, start->ee_pos, 0.0);
   nds_ctrl pid;
-  nds_ctrl_reset(&pid);
-  nds_ctrl_for_mass(&pid, world->m->body_mass[world->ee_body]);
+  nds_ctrl_reset(&pid, world->m->body_mass[world->ee_body]);
   double next_plan = 0.0, plan_wall = 0.0;
   nds_state s;
   nds_plan plan;

@@ -92,25 +92,8 @@ static int residuals(void *ctx, const double *x, int k, double *res) {
   return 0;
 }
 
-static int lm_solve(nds_fit *f, const nd_rollout *rs, int n, int iters,
-                    double theta[ND_NTHETA], nds_fit_out *out, char *err, int errlen);
-
-int nds_fit_refine(nds_fit *f, const nd_rollout *rs, int n, double theta[ND_NTHETA],
-                   nds_fit_out *out, char *err, int errlen) {
-  return lm_solve(f, rs, n, f->cfg.lm_iters, theta, out, err, errlen);
-}
-
-int nds_fit_cov(nds_fit *f, const double theta[ND_NTHETA], const nd_rollout *rs, int n,
-                double std[ND_NTHETA], char *err, int errlen) {
-  nds_fit_out out;
-  double th[ND_NTHETA];
-  memcpy(th, theta, sizeof(th));
-  memset(&out, 0, sizeof(out));
-  if (lm_solve(f, rs, n, 0, th, &out, err, errlen)) return -1;
-  memcpy(std, out.lm_std, sizeof(out.lm_std));
-  return 0;
-}
-
+/* iters Levenberg-Marquardt iterations from theta (in/out) into out's lm_ fields; 0: the
+ * covariance at theta only. */
 static int lm_solve(nds_fit *f, const nd_rollout *rs, int n, int iters,
                     double theta[ND_NTHETA], nds_fit_out *out, char *err, int errlen) {
   refine_ctx c = {.f = f, .rs = rs, .n = n};
@@ -181,4 +164,20 @@ done:
   free(c.theta);
   free(c.pred);
   return rc;
+}
+
+int nds_fit_refine(nds_fit *f, const nd_rollout *rs, int n, double theta[ND_NTHETA],
+                   nds_fit_out *out, char *err, int errlen) {
+  return lm_solve(f, rs, n, f->cfg.lm_iters, theta, out, err, errlen);
+}
+
+int nds_fit_cov(nds_fit *f, const double theta[ND_NTHETA], const nd_rollout *rs, int n,
+                double std[ND_NTHETA], char *err, int errlen) {
+  nds_fit_out out;
+  double th[ND_NTHETA];
+  memcpy(th, theta, sizeof(th));
+  memset(&out, 0, sizeof(out));
+  if (lm_solve(f, rs, n, 0, th, &out, err, errlen)) return -1;
+  memcpy(std, out.lm_std, sizeof(out.lm_std));
+  return 0;
 }

@@ -234,8 +234,7 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
   double sp = 0, se = 0, sr = 0;
   int cut = 0;
   nds_ctrl pid;
-  nds_ctrl_reset(&pid);
-  nds_ctrl_for_mass(&pid, m->body_mass[nm->ee_body]);
+  nds_ctrl_reset(&pid, m->body_mass[nm->ee_body]);
   const double mdt = m->opt.timestep;
   const long W = window_steps(cfg, mdt);
   /* The robust score's windows are the re-anchoring ones (the whole replay is one when not

@@ -105,8 +105,7 @@ void nds_rollout_ff(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
 
   for (int i = 0; i < mjNWARNING; i++) d->warning[i].number = WARN_START;
   nds_ctrl c;
-  nds_ctrl_reset(&c);
-  nds_ctrl_for_mass(&c, m->body_mass[nm->ee_body]);
+  nds_ctrl_reset(&c, m->body_mass[nm->ee_body]);
   double acc_sum = 0, v2_peak = 0, a2_peak = 0;
   double off[2], pos[2], vel[2], f[2];
   ee_offset(nm, off);
@@ -185,8 +184,7 @@ int nds_predict(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl, const 
   if (nds_state_set(nm, d, s0, err, errlen)) return -1;
   for (int i = 0; i < mjNWARNING; i++) d->warning[i].number = WARN_START;
   nds_ctrl c;
-  nds_ctrl_reset(&c);
-  nds_ctrl_for_mass(&c, m->body_mass[nm->ee_body]);
+  nds_ctrl_reset(&c, m->body_mass[nm->ee_body]);
   double off[2], pos[2], vel[2], f[2];
   ee_offset(nm, off);
   for (int i = 0; i < n; i++) {

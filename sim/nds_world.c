@@ -130,8 +130,7 @@ static int load_sphere(nds_world *w, char *err, int errlen) {
   nds_ctrl_cfg_default(&w->ctrl_cfg);
   nds_state_rest(&w->nm, c->obj[0], c->obj[1], c->obj[2], c->ee, &w->init);
   if (nds_state_set(&w->nm, w->d, &w->init, err, errlen)) return -1;
-  nds_ctrl_reset(&w->pid);
-  nds_ctrl_for_mass(&w->pid, w->m->body_mass[w->nm.ee_body]);
+  nds_ctrl_reset(&w->pid, w->m->body_mass[w->nm.ee_body]);
   return 0;
 }
 
@@ -352,8 +351,7 @@ void nds_world_step(nds_world *w, const double sp[2][4], nds_world_out *out) {
       char err[128];  /* the start state was checked at create */
       nds_state_set(&w->nm, d, &w->init, err, sizeof(err));
       mj_forward(w->m, d);
-      nds_ctrl_reset(&w->pid);
-      nds_ctrl_for_mass(&w->pid, w->m->body_mass[w->nm.ee_body]);
+      nds_ctrl_reset(&w->pid, w->m->body_mass[w->nm.ee_body]);
     }
     d->time = t;
   }

@@ -74,7 +74,7 @@ static int record_push5(const nds_model *w, mjData *d, int i, nd_rollout *r) {
   nds_ctrl_cfg ctrl;
   nds_ctrl_cfg_default(&ctrl);
   nds_ctrl pid;
-  nds_ctrl_reset(&pid);
+  nds_ctrl_reset(&pid, w->m->body_mass[w->ee_body]);
   for (int k = 0; k < n; k++) {
     int j = (int)(k * dt / T);
     if (j > M - 1) j = M - 1;

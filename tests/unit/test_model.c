@@ -519,7 +519,7 @@ static void test_ctrl(void **state) {
   nds_ctrl_cfg cfg;
   nds_ctrl_cfg_default(&cfg);
   nds_ctrl c;
-  nds_ctrl_reset(&c);
+  nds_ctrl_reset(&c, NDS_CTRL_M_REF);
   const double sp[2][4] = {{0.01, 0.1, 2.0, 0}, {-0.002, 0, -1.0, 0}};
   const double pos[2] = {0, 0}, vel[2] = {0.05, 0.02}, dt = 0.002;
   double f[2];
@@ -536,7 +536,7 @@ static void test_ctrl(void **state) {
   assert_near(f[1], -cfg.f_max, 0);
   /* A bad input shows as a bad force, not as a quietly saturated one. */
   const double nan_sp[2][4] = {{NAN, 0, 0, 0}, {0, 0, 0, 0}};
-  nds_ctrl_reset(&c);
+  nds_ctrl_reset(&c, NDS_CTRL_M_REF);
   nds_ctrl_pid(&cfg, &c, nan_sp, pos, vel, dt, f);
   assert_true(isnan(f[0]));
 
@@ -547,10 +547,9 @@ static void test_ctrl(void **state) {
 
   /* A sphere of 3 kg: every force and the bound three times as large. */
   double f1[2];
-  nds_ctrl_reset(&c);
+  nds_ctrl_reset(&c, NDS_CTRL_M_REF);
   nds_ctrl_pid(&cfg, &c, sp, pos, vel, dt, f1);
-  nds_ctrl_reset(&c);
-  nds_ctrl_for_mass(&c, 3.0 * NDS_CTRL_M_REF);
+  nds_ctrl_reset(&c, 3.0 * NDS_CTRL_M_REF);
   nds_ctrl_pid(&cfg, &c, sp, pos, vel, dt, f);
   assert_near(f[0], 3.0 * f1[0], 1e-9 * fabs(f1[0]));
   nds_ctrl_vel(&cfg, &c, vref, vel, f);
@@ -568,7 +567,7 @@ static double settle_error(double m, double dt, double seconds) {
   cfg.m_ff = m;
   cfg.f_max = INFINITY; /* the linear loop: saturation would cap an unstable one */
   nds_ctrl c;
-  nds_ctrl_reset(&c);
+  nds_ctrl_reset(&c, NDS_CTRL_M_REF);
   const double sp[2][4] = {{0.01, 0, 0, 0}, {0, 0, 0, 0}};
   double x[2] = {0, 0}, v[2] = {0, 0}, f[2];
   int n = (int)lround(seconds / dt);

@@ -54,7 +54,7 @@ static void record_push(const nds_model *nm, mjData *d, double yaw, const double
     nd_snap_seg_eval(&seg[i], T, s);
   }
   nds_ctrl c;
-  nds_ctrl_reset(&c);
+  nds_ctrl_reset(&c, nm->m->body_mass[nm->ee_body]);
   for (int k = 0; k < n; k++) {
     double t = k * dt;
     int i = (int)(t / T);
@@ -428,7 +428,7 @@ static void test_replay_velocity(void **state) {
   assert_int_equal(nds_theta_apply(&nm, heavy, err, sizeof(err)), 0);
   assert_int_equal(nds_replay(&nm, d, &rc, &r, &t2, NULL, err, sizeof(err)), 0);
   printf("velocity_replay_pos_ee mass1 %.3e mass2 %.3e m^2\n", t1.pos_ee, t2.pos_ee);
-  /* The gains scale with the sphere's mass (nds_ctrl_for_mass): in free space a heavier
+  /* The gains scale with the sphere's mass (nds_ctrl_reset's mass): in free space a heavier
    * sphere tracks alike; only what it pushes feels its mass. */
   assert_near(t2.pos_ee, t1.pos_ee, 1e-9 * t1.pos_ee);
   assert_true(t1.pos_o < 1e-20);  /* the box was never touched */

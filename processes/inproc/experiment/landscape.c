@@ -57,7 +57,7 @@ static int scripted_push(exp_study *s, int kind, nd_rollout *out, char *err, int
   nds_ctrl_cfg cc;
   nds_ctrl_cfg_default(&cc);
   nds_ctrl pid;
-  nds_ctrl_reset(&pid);
+  nds_ctrl_reset(&pid, s->su.world.m->body_mass[s->su.world.ee_body]);
   const int n = (int)lround((T + hold) / dt);
   for (int k = 0; k < n && k < s->rec.cap; k++) {
     double t = fmin(k * dt / T, 1.0);
