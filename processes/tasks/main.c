@@ -55,6 +55,8 @@ int main(int argc, char **argv) {
   const int64_t id0 = ndp_utime() / 1000;
   for (int i = 0; i < cfg.n && !ndp_quit; i++) {
     tasks_result r;
+    if (tasks_settle(lcm, &io, &cfg, err, sizeof(err))) goto done;
+    if (ndp_quit) break;
     if (tasks_run(lcm, &io, &cfg, &cfg.goals[i], id0 + i, &r, err, sizeof(err))) goto done;
     tasks_print(i, cfg.n, &cfg.goals[i], &r);
     if (cfg.record)
@@ -72,7 +74,7 @@ int main(int argc, char **argv) {
     plans += r.plans;
     obj_path += r.obj_path;
     ee_path += r.ee_path;
-    if (tasks_pause(lcm, &io, &cfg, rejected, i + 1 == cfg.n, err, sizeof(err))) goto done;
+    if (tasks_pause(lcm, &io, &cfg, err, sizeof(err))) goto done;
   }
   io.st.state = "done";
   ndp_status_tick(lcm, &io.st, 1);

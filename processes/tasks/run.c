@@ -101,7 +101,7 @@ int tasks_run(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, const nd_goal *g, in
   t.goal_yaw = g->yaw;
   t.eps = eps;
   t.time_limit = tau;
-  if (io->buf) tasks_buffer_begin(io->buf, &io->last, id, &goal);
+  if (io->buf && !io->no_record) tasks_buffer_begin(io->buf, &io->last, id, &goal);
   memset(&io->run, 0, sizeof(io->run));
   io->run.id = id;
   const double t0 = ndp_mono();
@@ -204,26 +204,67 @@ void tasks_print(int i, int n, const nd_goal *g, const tasks_result *r) {
 /* After a task: with --await-fit, wait for PARAMS fitted on the record just appended (the
  * paper's task -> append -> refit protocol, after the last task too, so a caller's next
  * run starts on the refit; the adapter's count may stay below ours if it refused a record,
- * hence the limit); then, unless it was the last, let the object come to rest. */
-int tasks_pause(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, int rejected, int last, char *err,
-                int errlen) {
+ * hence the limit). */
+int tasks_pause(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int errlen) {
   tasks_buffer *b = io->buf;
-  if (c->await_fit > 0 && b && b->last_ok) {
-    io->st.state = "awaiting fit";
-    const double t0 = ndp_mono(), t_end = t0 + c->await_fit;
-    while (!ndp_quit && ndp_mono() < t_end && b->params_n < b->w.records)
-      if (tasks_pump(lcm, io, fmin(0.05, t_end - ndp_mono()), err, errlen)) return -1;
-    if (b->params_n >= b->w.records)
-      fprintf(stderr, PROG ": PARAMS version %lld (fitted on %d rollouts) after %.2f s\n",
-              (long long)b->theta_version, (int)b->params_n, ndp_mono() - t0);
-    else if (!ndp_quit)
-      fprintf(stderr, PROG ": no PARAMS fitted on %lld rollouts within %g s; going on\n",
-              (long long)b->w.records, c->await_fit);
-  }
-  if (rejected || last) return 0;
-  io->st.state = "settling";
-  const double t_end = ndp_mono() + c->settle;
-  while (!ndp_quit && ndp_mono() < t_end)
+  if (!(c->await_fit > 0 && b && b->last_ok)) return 0;
+  io->st.state = "awaiting fit";
+  const double t0 = ndp_mono(), t_end = t0 + c->await_fit;
+  while (!ndp_quit && ndp_mono() < t_end && b->params_n < b->w.records)
     if (tasks_pump(lcm, io, fmin(0.05, t_end - ndp_mono()), err, errlen)) return -1;
+  if (b->params_n >= b->w.records)
+    fprintf(stderr, PROG ": PARAMS version %lld (fitted on %d rollouts) after %.2f s\n",
+            (long long)b->theta_version, (int)b->params_n, ndp_mono() - t0);
+  else if (!ndp_quit)
+    fprintf(stderr, PROG ": no PARAMS fitted on %lld rollouts within %g s; going on\n",
+            (long long)b->w.records, c->await_fit);
+  return 0;
+}
+
+/* The object's speed between frames a and b (older), its yaw rate counted at REST_ARM. */
+static double frame_speed(const nudge_mocap_t *a, const nudge_mocap_t *b) {
+  const double dt = 1e-6 * (double)(a->utime - b->utime);
+  if (!(dt > 0.0)) return INFINITY;
+  const double d = hypot(a->obj_pos[0] - b->obj_pos[0], a->obj_pos[1] - b->obj_pos[1]);
+  const double dyaw = fabs(nd_wrap_angle(nd_quat_yaw(a->obj_quat) - nd_quat_yaw(b->obj_quat)));
+  return fmax(d, REST_ARM * dyaw) / dt;
+}
+
+int tasks_settle(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int errlen) {
+  io->st.state = "settling";
+  io->no_record = 0;
+  const double t0 = ndp_mono();
+  /* Frames kept a quarter of REST_SPAN apart or more, eight of them: the newest and one
+   * at least REST_SPAN older are always there. */
+  nudge_mocap_t ring[8];
+  int n = 0;
+  double speed = INFINITY;
+  for (;;) {
+    if (ndp_quit) return 0;
+    const double now = ndp_mono();
+    if (io->frames > 0 &&
+        (n == 0 || 1e-6 * (double)(io->last.utime - ring[(n - 1) % 8].utime) >= REST_SPAN / 4)) {
+      ring[n % 8] = io->last;
+      n++;
+      for (int k = n - 2; k >= 0 && k >= n - 8; k--) {
+        const nudge_mocap_t *old = &ring[k % 8];
+        if (1e-6 * (double)(io->last.utime - old->utime) >= REST_SPAN) {
+          speed = frame_speed(&io->last, old);
+          break;
+        }
+      }
+    }
+    if (now - t0 >= c->settle && speed < REST_SPEED) return 0;
+    if (now - t0 >= fmax(c->settle, SETTLE_MAX)) break;
+    if (tasks_pump(lcm, io, 0.02, err, errlen)) return -1;
+  }
+  io->no_record = io->buf != NULL;
+  const char *why = io->buf ? ": the next task is not recorded (a record starts at rest)" : "";
+  if (isfinite(speed))
+    fprintf(stderr, PROG ": the object still moves at %.3f m/s after %.1f s%s\n", speed,
+            ndp_mono() - t0, why);
+  else
+    fprintf(stderr, PROG ": no MOCAP frames %.1f s apart within %.1f s to tell the object is "
+            "at rest%s\n", REST_SPAN, ndp_mono() - t0, why);
   return 0;
 }

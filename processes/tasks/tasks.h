@@ -33,13 +33,21 @@
 #define PROG "nudge-tasks"
 #define MAX_GOALS 1000
 #define MOCAP_GAP_WARN 0.5 /* s without a frame during a task before saying so */
+/* A record starts from the object at rest (nd_recorder.h): before each task the runner
+ * waits until the object moved less than REST_SPEED (its yaw times REST_ARM counted too)
+ * over REST_SPAN of frames, at most SETTLE_MAX; motion capture noise of 0.1 mm and 2 mrad
+ * per frame reads as ~2 mm/s over the span. */
+#define REST_SPEED 0.01  /* m/s */
+#define REST_SPAN 0.1    /* s */
+#define REST_ARM 0.05    /* m: about the object's half length */
+#define SETTLE_MAX 5.0   /* s */
 
 /* What the runner was asked to do; constant once parsed. */
 typedef struct {
   double eps, tau;  /* defaults for goals that set none */
   double workspace; /* goals need |x|, |y| <= workspace, m */
   double wait;      /* for the first MOCAP frame, s */
-  double settle;    /* between tasks, s */
+  double settle;    /* before each task, at least, s */
   const char *url;
   const char *record;            /* replay buffer to append to; NULL: no recording */
   double record_dt;              /* the robot's control step, s */
@@ -95,6 +103,7 @@ typedef struct {
   tasks_running run;
   double *ages;       /* MAX_PLAN_AGES: publication minus state time of each plan, ms */
   int nages;
+  int no_record;      /* the next task is not recorded: the object was not at rest */
 } tasks_io;
 
 /* How one task ended. */
@@ -132,8 +141,10 @@ int tasks_run(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, const nd_goal *g, in
 void tasks_print(int i, int n, const nd_goal *g, const tasks_result *r);
 /* What a ROBOT_STATE reflex code names: "joint 4 velocity", "Cartesian jerk". */
 const char *tasks_reflex_name(int reflex, int joint);
-/* After task i: await the fit of its record (--await-fit), then settle unless last. */
-int tasks_pause(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, int rejected, int last, char *err,
-                int errlen);
+/* After a task: await the fit of its record (--await-fit). */
+int tasks_pause(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int errlen);
+/* Before a task: wait c->settle s, then until the object is at rest (at most SETTLE_MAX);
+ * if it is not, say so and set io->no_record. 0, or -1 with a message on an LCM failure. */
+int tasks_settle(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int errlen);
 
 #endif

@@ -8,7 +8,9 @@
 # 2. One run of two episodes from sliding and torsional friction half the truth's: every episode's row
 #    is there with the fit it evaluated (versions 0, 1, 2 on 0, 1, 2 rollouts), the
 #    buffers hold the two training pushes and the five held-out evaluation tasks, the
-#    validation loss was scored for each row, the sliding error at episode 2 is below half
+#    validation loss was scored for each row, every record starts with the object at
+#    rest (a push follows the last without a settled start otherwise), the sliding error
+#    at episode 2 is below half
 #    the starting 50 %, the validation loss fell, and the summary lines, summary.csv and
 #    (with gnuplot) both figures are written.
 set -u
@@ -66,6 +68,12 @@ pt_val n_train buffer "$OUT/run_0/train.nrb" records_in_file
 pt_val n_val buffer "$OUT/run_0/val.nrb" records_in_file
 pt_check "train.nrb holds the 2 training pushes (got $n_train)" test "$n_train" = 2
 pt_check "val.nrb holds the 5 held-out evaluation tasks (got $n_val)" test "$n_val" = 5
+# Each push starts where the one before left the object; its record assumes it at rest.
+for b in train val; do
+  pt_val v0 buffer "$OUT/run_0/$b.nrb" record_start_speed_max
+  pt_check "$b.nrb: every record starts with the object at rest (fastest $v0 m/s)" \
+    awk -v v="$v0" 'BEGIN { exit !(v != "" && v < 0.01) }'
+done
 fig() { awk -v n="$1" '$1 == n { print $2 }' "$PT_WORK/study.out"; }
 for f in eval_success_ep0 eval_success_ep2 eval_success_last eval_time_ratio_ep2 \
   eval_time_ratio_last val_loss_ratio_ep2 reflex_stops runs_sliding_within5pct_ep2 \

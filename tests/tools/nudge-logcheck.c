@@ -956,6 +956,7 @@ static int cmd_buffer(const lc_opts *o) {
     return 1;
   }
   int64_t undecodable = 0;
+  double start_speed_max = 0.0;
   nd_rfile_tail tail;
   for (;;) {
     nd_rollout r;
@@ -982,6 +983,12 @@ static int cmd_buffer(const lc_opts *o) {
       found = g;
     }
     found[nfound++] = r.task_id;
+    /* The object's mean speed over a rollout's first 10 steps: a record starts at rest. */
+    if (r.n >= 10) {
+      const double *o = nd_rollout_obj(&r, 9);
+      const double v = hypot(o[0] - r.obj_pos[0], o[1] - r.obj_pos[1]) / (10 * r.dt);
+      if (!(v <= start_speed_max)) start_speed_max = v;
+    }
     nd_rollout_free(&r);
   }
   const int corrupt = (int)undecodable + (tail.status == ND_RFILE_CORRUPT);
@@ -995,6 +1002,7 @@ static int cmd_buffer(const lc_opts *o) {
   int dup = 0;
   for (int i = 1; i < nfound; i++) dup += found[i] == found[i - 1];
   printf("records_duplicate %d count\n", dup);
+  printf("record_start_speed_max %.4f m/s\n", start_speed_max);
   if (o->committed) {
     int missing = 0, dup_c = 0, extra = 0;
     for (int i = 0; i < ncommitted; i++) {
