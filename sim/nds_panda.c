@@ -216,28 +216,36 @@ int nds_panda_ik(const nds_panda_cfg *cfg, const double target[3], const double 
   return -1;
 }
 
-/* max_i r |u_i| / lim_i over horizontal unit directions u of the sphere (tool held down),
- * u_i the minimum-norm joint rate per unit sphere rate. */
-static double rate_ratio(const nds_panda_cfg *cfg, const double q[NJ], double r,
-                         const double lim[NJ]) {
+int nds_panda_rate_map(const nds_panda_cfg *cfg, const double q[NJ], double rates[NJ][2]) {
   double J[35], A[25];
   nds_panda_jac(cfg, q, J);
   nd_aat(J, 5, NJ, 0, A);
-  if (nd_chol(A, 5)) return INFINITY;
+  if (nd_chol(A, 5)) return -1;
   /* Columns 0 and 1 of J' (J J')^-1: the joint rates of a unit sphere rate along world x
-   * and along y, no tilt. A direction phi needs cos phi of one plus sin phi of the other,
-   * whose largest size over phi is their Euclidean norm. */
+   * and along y, no tilt. */
   double ex[5] = {1, 0, 0, 0, 0}, ey[5] = {0, 1, 0, 0, 0};
   nd_chol_solve(A, 5, ex, ex);
   nd_chol_solve(A, 5, ey, ey);
+  for (int i = 0; i < NJ; i++) {
+    rates[i][0] = rates[i][1] = 0;
+    for (int k = 0; k < 5; k++) {
+      rates[i][0] += J[k * NJ + i] * ex[k];
+      rates[i][1] += J[k * NJ + i] * ey[k];
+    }
+  }
+  return 0;
+}
+
+/* max_i r |u_i| / lim_i over horizontal unit directions u of the sphere: a direction phi
+ * needs cos phi of one rate plus sin phi of the other, whose largest size over phi is
+ * their Euclidean norm. */
+static double rate_ratio(const nds_panda_cfg *cfg, const double q[NJ], double r,
+                         const double lim[NJ]) {
+  double m[NJ][2];
+  if (nds_panda_rate_map(cfg, q, m)) return INFINITY;
   double worst = 0;
   for (int i = 0; i < NJ; i++) {
-    double a = 0, b = 0;
-    for (int k = 0; k < 5; k++) {
-      a += J[k * NJ + i] * ex[k];
-      b += J[k * NJ + i] * ey[k];
-    }
-    double ratio = r * sqrt(a * a + b * b) / lim[i];
+    const double ratio = r * sqrt(m[i][0] * m[i][0] + m[i][1] * m[i][1]) / lim[i];
     if (ratio > worst) worst = ratio;
   }
   return worst;

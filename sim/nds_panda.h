@@ -155,6 +155,11 @@ int nds_panda_ik(const nds_panda_cfg *cfg, const double target[3],
                  const double seed[NDS_PANDA_NJ], double q[NDS_PANDA_NJ], char *err,
                  int errlen);
 
+/* The minimum-norm joint rates per unit sphere rate, tool held down, at q: rates[i][0]
+ * of joint i along world x, rates[i][1] along y. Return 0, or -1 at a singularity. */
+int nds_panda_rate_map(const nds_panda_cfg *cfg, const double q[NDS_PANDA_NJ],
+                       double rates[NDS_PANDA_NJ][2]);
+
 /* How close moving the sphere at speed v (m/s) in any horizontal direction, tool held
  * down, brings the joints at q to their velocity limits: max_i |dq_i| / dq_max_i of the
  * minimum-norm joint velocity. Infinite at a singularity. */

@@ -83,8 +83,9 @@ static void setpoint_peaks(const nds_planner *p, const double *keys, double peak
       if (!(sv <= v2)) v2 = sv;
       if (!(sa <= a2)) a2 = sa;
       if (c->reach) {
-        const double pos[2] = {sp[0][ND_P], sp[1][ND_P]};
-        const double l = nds_reach_load(c->reach, pos, sqrt(sv), sqrt(sa));
+        const double pos[2] = {sp[0][ND_P], sp[1][ND_P]}, vel[2] = {sp[0][ND_V], sp[1][ND_V]},
+                     acc[2] = {sp[0][ND_A], sp[1][ND_A]};
+        const double l = nds_reach_load(c->reach, pos, vel, acc);
         if (!(l <= load)) load = l;
       }
     }

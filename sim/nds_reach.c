@@ -20,12 +20,11 @@ int nds_reach_build(nds_reach *r, const nds_panda_cfg *cfg, const double lo[2],
   r->lo[0] = lo[0], r->lo[1] = lo[1], r->step = step;
   r->nx = (int)ceil((hi[0] - lo[0]) / step) + 1;
   r->ny = (int)ceil((hi[1] - lo[1]) / step) + 1;
-  r->vr = malloc(sizeof(float) * 2 * r->nx * r->ny);
-  if (!r->vr) {
+  r->rate = malloc(sizeof(float) * 2 * NDS_PANDA_NJ * r->nx * r->ny);
+  if (!r->rate) {
     snprintf(err, errlen, "reach: out of memory for %d x %d cells", r->nx, r->ny);
     return -1;
   }
-  r->ar = r->vr + r->nx * r->ny;
   /* Row by row, each cell seeded from its solved neighbour: IK follows one branch of the
    * arm's self-motion across the table, as the impedance controller's null space does. */
   double row_seed[NDS_PANDA_NJ], seed[NDS_PANDA_NJ], q[NDS_PANDA_NJ];
@@ -36,27 +35,28 @@ int nds_reach_build(nds_reach *r, const nds_panda_cfg *cfg, const double lo[2],
     for (int ix = 0; ix < r->nx; ix++) {
       const double target[3] = {lo[0] + ix * step, lo[1] + iy * step,
                                 nds_panda_push_height(cfg)};
-      const int c = iy * r->nx + ix;
-      if (nds_panda_ik(cfg, target, seed, q, why, sizeof(why))) {
-        r->vr[c] = r->ar[c] = INFINITY;
+      float *cell = r->rate + (size_t)2 * NDS_PANDA_NJ * (iy * r->nx + ix);
+      double m[NDS_PANDA_NJ][2];
+      if (nds_panda_ik(cfg, target, seed, q, why, sizeof(why)) || nds_panda_rate_map(cfg, q, m)) {
+        for (int k = 0; k < 2 * NDS_PANDA_NJ; k++) cell[k] = INFINITY;
         r->unreachable++;
         continue;
       }
       memcpy(seed, q, sizeof(seed));
       if (ix == 0) memcpy(row_seed, q, sizeof(row_seed));
-      r->vr[c] = (float)nds_panda_speed_ratio(cfg, q, 1.0);
-      r->ar[c] = (float)nds_panda_accel_ratio(cfg, q, 1.0);
+      for (int i = 0; i < NDS_PANDA_NJ; i++) cell[2 * i] = (float)m[i][0], cell[2 * i + 1] = (float)m[i][1];
     }
   }
   return 0;
 }
 
 void nds_reach_free(nds_reach *r) {
-  free(r->vr);
+  free(r->rate);
   memset(r, 0, sizeof(*r));
 }
 
-double nds_reach_load(const nds_reach *r, const double p[2], double v, double a) {
+double nds_reach_load(const nds_reach *r, const double p[2], const double v[2],
+                      const double a[2]) {
   const double fx = (p[0] - r->lo[0]) / r->step, fy = (p[1] - r->lo[1]) / r->step;
   if (!(fx >= 0.0 && fy >= 0.0 && fx <= r->nx - 1 && fy <= r->ny - 1)) return INFINITY;
   int ix = (int)fx, iy = (int)fy;
@@ -66,11 +66,22 @@ double nds_reach_load(const nds_reach *r, const double p[2], double v, double a)
   if (iy < 0) iy = 0;
   const double u = fx - ix, w = fy - iy;
   const int c = iy * r->nx + ix, nx = r->nx > 1 ? 1 : 0, ny = r->ny > 1 ? r->nx : 0;
-  /* Bilinear; an unreachable corner makes the whole cell unreachable. */
-  const double vr = (1 - w) * ((1 - u) * r->vr[c] + u * r->vr[c + nx]) +
-                    w * ((1 - u) * r->vr[c + ny] + u * r->vr[c + ny + nx]);
-  const double ar = (1 - w) * ((1 - u) * r->ar[c] + u * r->ar[c + nx]) +
-                    w * ((1 - u) * r->ar[c + ny] + u * r->ar[c + ny + nx]);
-  if (!isfinite(vr) || !isfinite(ar)) return INFINITY;
-  return fmax(v * vr, a * ar);
+  const int K = 2 * NDS_PANDA_NJ;
+  const float *c00 = r->rate + (size_t)K * c, *c10 = r->rate + (size_t)K * (c + nx),
+              *c01 = r->rate + (size_t)K * (c + ny), *c11 = r->rate + (size_t)K * (c + ny + nx);
+  /* Bilinear in the rates; an unreachable corner makes the whole cell unreachable. */
+  double load = 0.0;
+  for (int i = 0; i < NDS_PANDA_NJ; i++) {
+    double m[2];
+    for (int k = 0; k < 2; k++) {
+      const int j = 2 * i + k;
+      m[k] = (1 - w) * ((1 - u) * c00[j] + u * c10[j]) + w * ((1 - u) * c01[j] + u * c11[j]);
+    }
+    if (!isfinite(m[0]) || !isfinite(m[1])) return INFINITY;
+    const double lv = fabs(m[0] * v[0] + m[1] * v[1]) / nds_panda_dq_max[i];
+    const double la = fabs(m[0] * a[0] + m[1] * a[1]) / nds_panda_ddq_max[i];
+    if (lv > load) load = lv;
+    if (la > load) load = la;
+  }
+  return load;
 }

@@ -2,12 +2,11 @@
  * table, so a planner can rank motions the arm cannot make behind those it can.
  *
  * On a grid over a box, each cell holds the inverse kinematics' joints (tool down, seeded
- * from the neighbour solved before) and from them the joint velocity ratio per m/s of
- * sphere speed and the joint acceleration ratio per m/s^2 (nds_panda_speed_ratio and
- * nds_panda_accel_ratio: the worst joint against its limit, over every horizontal
- * direction; both linear in the rate). A cell whose IK fails or comes within
- * NDS_PANDA_IK_MARGIN of a joint limit is unreachable. Built once (allocates); the queries
- * allocate nothing. */
+ * from the neighbour solved before) and from them the joint rates per unit sphere rate
+ * along x and y (nds_panda_rate_map), so a motion's load follows its direction: moving
+ * radially folds the elbow several times faster than moving across. A cell whose IK
+ * fails or comes within NDS_PANDA_IK_MARGIN of a joint limit is unreachable. Built once
+ * (allocates); the queries allocate nothing. */
 #ifndef NDS_REACH_H
 #define NDS_REACH_H
 
@@ -16,7 +15,8 @@
 typedef struct {
   double lo[2], step;   /* grid origin (cell 0's centre) and spacing, m */
   int nx, ny;
-  float *vr, *ar;       /* per cell, row-major in y: ratio per m/s, per m/s^2; inf: no IK */
+  float *rate;          /* per cell, row-major in y: NDS_PANDA_NJ x 2 joint rates per unit
+                           sphere rate along x, y; inf: no IK */
   int unreachable;      /* cells without an IK solution */
 } nds_reach;
 
@@ -26,10 +26,12 @@ int nds_reach_build(nds_reach *r, const nds_panda_cfg *cfg, const double lo[2],
                     const double hi[2], double step, char *err, int errlen);
 void nds_reach_free(nds_reach *r);
 
-/* The arm's load moving the sphere at p with speed v and acceleration a: the larger of
- * the interpolated joint velocity and acceleration ratios (1 = at a limit); infinite at
- * an unreachable cell or outside the box. The acceleration ratio is from rest: at speed
- * the joints' velocity-product terms add to it, so keep a margin below 1. */
-double nds_reach_load(const nds_reach *r, const double p[2], double v, double a);
+/* The arm's load moving the sphere at p with velocity v and acceleration a (x, y): the
+ * largest joint velocity or acceleration over its limit (1 = at a limit), from the
+ * interpolated rates; infinite at an unreachable cell or outside the box. The
+ * acceleration is from rest: at speed the joints' velocity-product terms add to it, so
+ * keep a margin below 1. */
+double nds_reach_load(const nds_reach *r, const double p[2], const double v[2],
+                      const double a[2]);
 
 #endif

@@ -2,6 +2,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "nd_math.h"
 #include "nd_snap.h"
 #include "nd_test.h"
 #include "nds_panda.h"
@@ -311,9 +312,9 @@ static void test_ik_workspace_grid(void **state) {
   assert_contains(err, "IK: (-0.300");
 }
 
-/* The reach map agrees with IK at points between its nodes, serves the lab box at the
- * lab's 0.5 m/s, shows where beyond it the arm cannot go that fast, and is infinite
- * where there is no IK or no map. */
+/* The reach map agrees with IK at points between its nodes in every direction, serves the
+ * lab box at the lab's 0.5 m/s, tells radial from cross motion, shows where beyond the box
+ * the arm cannot go that fast, and is infinite where there is no IK or no map. */
 static void test_reach_map(void **state) {
   (void)state;
   nds_panda_cfg cfg;
@@ -325,37 +326,63 @@ static void test_reach_map(void **state) {
   if (nds_reach_build(&r, &cfg, lo, hi, 0.02, err, sizeof err)) fail_msg("%s", err);
   assert_int_equal(r.nx, 31);
   assert_int_equal(r.ny, 51);
-  double worst_rel = 0.0, lab_worst = 0.0;
-  double q[NJ];
+  double worst_rel = 0.0, lab_worst = 0.0, spread = 1.0;
+  double q[NJ], m[NJ][2];
+  const double zero[2] = {0.0, 0.0}, S = NDS_PANDA_WS_SPEED;
   for (double x = NDS_PANDA_WS_XMIN; x <= NDS_PANDA_WS_XMAX + 1e-9; x += 0.0137) {
     for (double y = NDS_PANDA_WS_YMIN; y <= NDS_PANDA_WS_YMAX + 1e-9; y += 0.0213) {
       const double t[3] = {x, y, z}, p[2] = {x, y};
       if (nds_panda_ik(&cfg, t, NULL, q, err, sizeof err)) fail_msg("%s", err);
-      const double direct = nds_panda_speed_ratio(&cfg, q, NDS_PANDA_WS_SPEED);
-      const double mapped = nds_reach_load(&r, p, NDS_PANDA_WS_SPEED, 0.0);
-      worst_rel = fmax(worst_rel, fabs(mapped / direct - 1.0));
-      lab_worst = fmax(lab_worst, mapped);
-      /* Linear in the rates, the larger of the two. */
-      assert_near(nds_reach_load(&r, p, 2 * NDS_PANDA_WS_SPEED, 0.0), 2 * mapped, 1e-9);
-      assert_true(nds_reach_load(&r, p, NDS_PANDA_WS_SPEED, 1.0) >= mapped);
+      assert_int_equal(nds_panda_rate_map(&cfg, q, m), 0);
+      double lmin = INFINITY, lmax = 0.0;
+      for (int k = 0; k < 12; k++) {
+        const double u[2] = {cos(k * ND_PI / 12), sin(k * ND_PI / 12)};
+        const double v[2] = {S * u[0], S * u[1]}, a[2] = {u[0], u[1]};
+        double dv = 0.0, da = 0.0;
+        for (int i = 0; i < NJ; i++) {
+          const double rate = fabs(m[i][0] * u[0] + m[i][1] * u[1]);
+          dv = fmax(dv, S * rate / nds_panda_dq_max[i]);
+          da = fmax(da, rate / nds_panda_ddq_max[i]);
+        }
+        const double mv = nds_reach_load(&r, p, v, zero), ma = nds_reach_load(&r, p, zero, a);
+        worst_rel = fmax(worst_rel, fmax(fabs(mv / dv - 1.0), fabs(ma / da - 1.0)));
+        lmin = fmin(lmin, mv);
+        lmax = fmax(lmax, mv);
+        /* Linear in the rates, the larger of the two. */
+        const double v2[2] = {2 * v[0], 2 * v[1]};
+        assert_near(nds_reach_load(&r, p, v2, zero), 2 * mv, 1e-9);
+        assert_true(nds_reach_load(&r, p, v, a) >= fmax(mv, ma) - 1e-12);
+      }
+      /* No direction beyond the worst one nds_panda_speed_ratio gives. */
+      assert_true(lmax <= nds_panda_speed_ratio(&cfg, q, S) * 1.05);
+      lab_worst = fmax(lab_worst, lmax);
+      spread = fmin(spread, lmin / lmax);
     }
   }
-  int over = 0;
-  for (int c = 0; c < r.nx * r.ny; c++) over += r.vr[c] * NDS_PANDA_WS_SPEED > 1.0;
-  print_message("reach: map vs IK within %.2f %%, lab box at 0.5 m/s worst %.3f, %d of %d "
-                "cells beyond 0.5 m/s, %d unreachable\n", 100 * worst_rel, lab_worst, over,
-                r.nx * r.ny, r.unreachable);
+  int over = 0, unreachable = -1;
+  for (int c = 0; c < r.nx * r.ny; c++) {
+    const float *cell = r.rate + 2 * NJ * c;
+    if (!isfinite(cell[0])) {
+      unreachable = c;
+      continue;
+    }
+    for (int i = 0, hit = 0; i < NJ && !hit; i++)
+      over += hit = S * hypot(cell[2 * i], cell[2 * i + 1]) / nds_panda_dq_max[i] > 1.0;
+  }
+  print_message("reach: map vs IK within %.2f %%, lab box at 0.5 m/s worst %.3f, least over "
+                "most loaded direction %.2f, %d of %d cells beyond 0.5 m/s, %d unreachable\n",
+                100 * worst_rel, lab_worst, spread, over, r.nx * r.ny, r.unreachable);
   assert_true(worst_rel < 0.05);
   assert_true(lab_worst <= NDS_PANDA_WS_SPEED_RATIO * 1.02);
+  assert_true(spread < 0.5);
   assert_true(over > 0);
-  const double off_map[2] = {0.8, 0.0};
-  assert_true(isinf(nds_reach_load(&r, off_map, 0.1, 0.0)));
-  assert_true(isinf(nds_reach_load(&r, (const double[2]){NAN, 0.0}, 0.1, 0.0)));
-  if (r.unreachable) {
-    int c = 0;
-    while (isfinite(r.vr[c])) c++;
-    const double p[2] = {lo[0] + (c % r.nx) * 0.02, lo[1] + (c / r.nx) * 0.02};
-    assert_true(isinf(nds_reach_load(&r, p, 0.0, 0.0)));
+  const double off_map[2] = {0.8, 0.0}, slow[2] = {0.1, 0.0};
+  assert_true(isinf(nds_reach_load(&r, off_map, slow, zero)));
+  assert_true(isinf(nds_reach_load(&r, (const double[2]){NAN, 0.0}, slow, zero)));
+  assert_int_equal(unreachable >= 0, r.unreachable > 0);
+  if (unreachable >= 0) {
+    const double p[2] = {lo[0] + (unreachable % r.nx) * 0.02, lo[1] + (unreachable / r.nx) * 0.02};
+    assert_true(isinf(nds_reach_load(&r, p, zero, zero)));
   }
   nds_reach_free(&r);
   const double bad_hi[2] = {-0.4, 0.0};
