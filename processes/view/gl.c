@@ -126,6 +126,7 @@ int view_gl_init(view_gl *g, const mjModel *m, int w, int h, int visible,
     snprintf(err, errlen, "the OpenGL driver offers no offscreen framebuffer");
     return -1;
   }
+  if (view_text_init(&g->text, &g->con, w, h, err, errlen)) return -1;
   glfwSetWindowUserPointer(g->win, g);
   if (visible) {
     glfwSetMouseButtonCallback(g->win, on_button);
@@ -180,6 +181,7 @@ int view_gl_poll(view_gl *g) {
 void view_gl_free(view_gl *g) {
   if (g->win) {
     glfwMakeContextCurrent(g->win);
+    view_text_free(&g->text);
     mjr_freeContext(&g->con);
     mjv_freeScene(&g->scn);
     glfwDestroyWindow(g->win);

@@ -97,15 +97,23 @@ static void right_block(const view_inputs *in, int64_t now_us, text *k, text *v)
   }
 }
 
-void view_overlay(const view_inputs *in, int64_t now_us, mjrRect vp, const mjrContext *con) {
+/* One block of text: from the atlas when there is one. */
+static void block(const view_text *t, const mjrContext *con, mjrRect vp, int right,
+                  const char *k, const char *v) {
+  if (t->tex) view_text_block(t, vp, right, k, v);
+  else mjr_overlay(mjFONT_NORMAL, right ? mjGRID_TOPRIGHT : mjGRID_TOPLEFT, vp, k, v, con);
+}
+
+void view_overlay(const view_inputs *in, int64_t now_us, mjrRect vp, const mjrContext *con,
+                  const view_text *t) {
   char kb[1024], vb[2048];
   text k = {kb, sizeof kb, 0}, v = {vb, sizeof vb, 0};
   kb[0] = vb[0] = '\0';
   left_block(in, now_us, &k, &v);
-  mjr_overlay(mjFONT_NORMAL, mjGRID_TOPLEFT, vp, kb, vb, con);
+  block(t, con, vp, 0, kb, vb);
   if (!in->nprocs) return;
   k.n = v.n = 0;
   kb[0] = vb[0] = '\0';
   right_block(in, now_us, &k, &v);
-  mjr_overlay(mjFONT_NORMAL, mjGRID_TOPRIGHT, vp, kb, vb, con);
+  block(t, con, vp, 1, kb, vb);
 }

@@ -30,7 +30,7 @@ static void draw(view_app *v, int64_t now_us, int read) {
   view_scene_hide_unseen(&v->sc, &v->in, &v->g.scn);
   v->dropped += view_draw(&v->sc, &v->in, &v->g.scn);
   view_gl_render(&v->g);
-  if (!v->o->no_overlay) view_overlay(&v->in, now_us, view_gl_viewport(&v->g), &v->g.con);
+  if (!v->o->no_overlay) view_overlay(&v->in, now_us, view_gl_viewport(&v->g), &v->g.con, &v->g.text);
   view_gl_finish(&v->g, read);
   v->renders++;
   v->last_us = now_us;

@@ -145,10 +145,37 @@ void view_scene_free(view_scene *s);
  * the number of geoms that did not fit. */
 int view_draw(const view_scene *s, const view_inputs *in, mjvScene *scn);
 
+/* ---- text.c ------------------------------------------------------------------------ */
+
+/* MuJoCo's normal font as one alpha texture of glyph cells (tex 0: not built, the frame
+ * too small for a row of cells; the overlay then uses MuJoCo's own text). */
+typedef struct {
+  int x, y, w, h;     /* a glyph's inked pixels in its cell (w 0: none) */
+} view_text_box;
+
+typedef struct {
+  unsigned int tex;
+  view_text_box box[95];  /* ' ' .. '~' */
+  int cw, ch, line;   /* cell size; the raster position is `line` px up the cell */
+  int tw, th;         /* the texture's size */
+  int adv[128];       /* advance per character, px */
+} view_text;
+
+/* Capture the glyphs of con's normal font through its offscreen buffer (w x h, cleared:
+ * call before the first frame). 0, or -1 with a message. */
+int view_text_init(view_text *t, const mjrContext *con, int w, int h, char *err, int errlen);
+void view_text_free(view_text *t);
+
+/* Two columns of '\n'-separated lines, keys and values, on a dark band at the top left
+ * (right 0) or top right of vp. */
+void view_text_block(const view_text *t, mjrRect vp, int right, const char *keys,
+                     const char *values);
+
 /* ---- overlay.c --------------------------------------------------------------------- */
 
-/* Draw the text over the frame in viewport vp of con. */
-void view_overlay(const view_inputs *in, int64_t now_us, mjrRect vp, const mjrContext *con);
+/* Draw the text over the frame in viewport vp: with t's atlas, else MuJoCo's text. */
+void view_overlay(const view_inputs *in, int64_t now_us, mjrRect vp, const mjrContext *con,
+                  const view_text *t);
 
 /* ---- gl.c -------------------------------------------------------------------------- */
 
@@ -159,6 +186,7 @@ typedef struct {
   mjvCamera cam, cam0;        /* cam0: the camera to reset to (key R) */
   mjvOption opt;
   mjrContext con;
+  view_text text;
   const mjModel *m;
   unsigned char *rgb;         /* w * h * 3, rows bottom-up as mjr_readPixels gives them */
   int btn_left, btn_right, btn_middle;

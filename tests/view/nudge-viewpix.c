@@ -12,6 +12,7 @@
  * Colour classes, for what nudge-view draws (scene.c, draw.c) under its lighting:
  *   blue    the box            green   the goal ghost       orange  the predicted ghost
  *   red     the sphere         yellow  keypoints and path   cyan    the setpoint trail
+ *   white   the overlay's text
  * Exit status 0, 1 if a file is not a P6 PPM, 2 on bad usage. */
 #include <stdio.h>
 #include <stdlib.h>
@@ -45,6 +46,7 @@ static int is_class(const char *c, int r, int g, int b) {
   if (!strcmp(c, "red")) return r > 110 && r > g + 80 && r > b + 80;
   if (!strcmp(c, "orange")) return r > 150 && g > 90 && r > g + 30 && g > b + 30;
   if (!strcmp(c, "yellow")) return r > 150 && g > 130 && b < 90 && r - g < 60;
+  if (!strcmp(c, "white")) return r > 200 && g > 200 && b > 200;
   if (!strcmp(c, "cyan")) return g > 110 && b > 110 && r < g - 60 && r < b - 60;
   return -1;
 }

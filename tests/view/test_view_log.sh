@@ -10,7 +10,7 @@
 # 2. The same at --speed 1: 50 frames again, taking about the log's 2.5 s of wall time.
 # 3. The same log with invalid and undecodable messages on every channel interleaved: the
 #    frame at 2 s, text overlay included, is identical to the clean log's, and the view
-#    refused exactly the messages injected.
+#    refused exactly the messages injected. The text is drawn in both top corners.
 # 4. lcm-logger recording a scripted live run: its log becomes an MP4 of ceil(span x fps)
 #    frames, span being the log's first to last timestamp, and shows the box.
 set -u
@@ -76,6 +76,16 @@ read -r ng < <("$VW_PIX" blob "$W/good.ppm" green | awk '{ v[$1] = $2 } END { pr
 read -r nc < <("$VW_PIX" blob "$W/good.ppm" cyan | awk '{ v[$1] = $2 } END { print v["blob_n"] }')
 pt_check "the frame shows the goal ghost ($ng green pixels) and the setpoint trail ($nc cyan)" \
   eval 'test "${ng:-0}" -gt 500 && test "${nc:-0}" -gt 100'
+# The text: drawn in both top corners (task and theta at the left, the heartbeats at the
+# right), and nowhere else a frame without it differs.
+"$VW" --hidden --log "$W/good.lcmlog" --speed 0 --fps 20 --png "$W/plain.png" --png-at 2 \
+  --no-overlay >/dev/null 2>&1
+ffmpeg -nostdin -loglevel error -y -i "$W/plain.png" "$W/plain.ppm"
+read -r tl < <("$VW_PIX" blob "$W/good.ppm" white 0 0 400 120 | awk '$1 == "blob_n" { print $2 }')
+read -r tr < <("$VW_PIX" blob "$W/good.ppm" white 880 0 1280 60 | awk '$1 == "blob_n" { print $2 }')
+read -r t0 < <("$VW_PIX" blob "$W/plain.ppm" white 0 0 1280 120 | awk '$1 == "blob_n" { print $2 }')
+pt_check "text at the top left ($tl white pixels) and right ($tr), none without it ($t0)" \
+  eval 'test "${tl:-0}" -gt 400 && test "${tr:-0}" -gt 100 && test "${t0:-1}" -lt 20'
 
 # --- 4. lcm-logger on a live run -------------------------------------------------------------
 pt_spawn logger lcm-logger -q -f "$W/live.lcmlog"
