@@ -44,7 +44,10 @@ int nds_reach_build(nds_reach *r, const nds_panda_cfg *cfg, const double lo[2],
       }
       memcpy(seed, q, sizeof(seed));
       if (ix == 0) memcpy(row_seed, q, sizeof(row_seed));
-      for (int i = 0; i < NDS_PANDA_NJ; i++) cell[2 * i] = (float)m[i][0], cell[2 * i + 1] = (float)m[i][1];
+      for (int i = 0; i < NDS_PANDA_NJ; i++) {
+        cell[2 * i] = (float)m[i][0];
+        cell[2 * i + 1] = (float)m[i][1];
+      }
     }
   }
   return 0;

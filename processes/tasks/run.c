@@ -234,25 +234,20 @@ int tasks_settle(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int er
   io->st.state = "settling";
   io->no_record = 0;
   const double t0 = ndp_mono();
-  /* Frames kept a quarter of REST_SPAN apart or more, eight of them: the newest and one
-   * at least REST_SPAN older are always there. */
-  nudge_mocap_t ring[8];
-  int n = 0;
+  /* The speed over the span from a reference frame to the first frame REST_SPAN later,
+   * which becomes the next reference. */
+  nudge_mocap_t ref;
+  int have_ref = 0;
   double speed = INFINITY;
   for (;;) {
     if (ndp_quit) return 0;
     const double now = ndp_mono();
-    if (io->frames > 0 &&
-        (n == 0 || 1e-6 * (double)(io->last.utime - ring[(n - 1) % 8].utime) >= REST_SPAN / 4)) {
-      ring[n % 8] = io->last;
-      n++;
-      for (int k = n - 2; k >= 0 && k >= n - 8; k--) {
-        const nudge_mocap_t *old = &ring[k % 8];
-        if (1e-6 * (double)(io->last.utime - old->utime) >= REST_SPAN) {
-          speed = frame_speed(&io->last, old);
-          break;
-        }
-      }
+    if (io->frames > 0 && !have_ref) {
+      ref = io->last;
+      have_ref = 1;
+    } else if (have_ref && 1e-6 * (double)(io->last.utime - ref.utime) >= REST_SPAN) {
+      speed = frame_speed(&io->last, &ref);
+      ref = io->last;
     }
     if (now - t0 >= c->settle && speed < REST_SPEED) return 0;
     if (now - t0 >= fmax(c->settle, SETTLE_MAX)) break;

@@ -15,12 +15,12 @@
 #include "view.h"
 
 #define FIRST 32      /* ' ' */
-#define NCHARS 95     /* ' ' .. '~' */
+#define NCHARS VIEW_TEXT_NCHARS
 #define COLS 16
 #define ROWS ((NCHARS + COLS - 1) / COLS)
 #define PAD 4         /* px of cell around a glyph's advance: kerning and overhang */
 
-int view_text_init(view_text *t, const mjrContext *con, int w, int h, char *err, int errlen) {
+int view_text_init(view_text *t, mjrContext *con, int w, int h, char *err, int errlen) {
   memset(t, 0, sizeof(*t));
   int adv = 0;
   for (int c = FIRST; c < FIRST + NCHARS; c++)
@@ -40,7 +40,7 @@ int view_text_init(view_text *t, const mjrContext *con, int w, int h, char *err,
     return -1;
   }
   const mjrRect vp = {0, 0, w, h};
-  mjr_setBuffer(mjFB_OFFSCREEN, (mjrContext *)con);
+  mjr_setBuffer(mjFB_OFFSCREEN, con);
   for (int row = 0; row < ROWS; row++) {
     glViewport(0, 0, w, h);
     glDisable(GL_DEPTH_TEST);
@@ -108,7 +108,10 @@ void view_text_free(view_text *t) {
 /* Width of line s (up to '\n' or the end) in pixels, and where it ends. */
 static int line_width(const view_text *t, const char *s, const char **end) {
   int w = 0;
-  for (; *s && *s != '\n'; s++) w += t->adv[(unsigned char)*s & 127];
+  for (; *s && *s != '\n'; s++) {
+    const int c = (unsigned char)*s;
+    if (c < 128) w += t->adv[c];  /* 0 for what has no glyph, as put_line skips it */
+  }
   *end = s;
   return w;
 }

@@ -149,13 +149,15 @@ int view_draw(const view_scene *s, const view_inputs *in, mjvScene *scn);
 
 /* MuJoCo's normal font as one alpha texture of glyph cells (tex 0: not built, the frame
  * too small for a row of cells; the overlay then uses MuJoCo's own text). */
+#define VIEW_TEXT_NCHARS 95 /* the glyphs ' ' .. '~' */
+
 typedef struct {
   int x, y, w, h;     /* a glyph's inked pixels in its cell (w 0: none) */
 } view_text_box;
 
 typedef struct {
   unsigned int tex;
-  view_text_box box[95];  /* ' ' .. '~' */
+  view_text_box box[VIEW_TEXT_NCHARS];
   int cw, ch, line;   /* cell size; the raster position is `line` px up the cell */
   int tw, th;         /* the texture's size */
   int adv[128];       /* advance per character, px */
@@ -163,7 +165,7 @@ typedef struct {
 
 /* Capture the glyphs of con's normal font through its offscreen buffer (w x h, cleared:
  * call before the first frame). 0, or -1 with a message. */
-int view_text_init(view_text *t, const mjrContext *con, int w, int h, char *err, int errlen);
+int view_text_init(view_text *t, mjrContext *con, int w, int h, char *err, int errlen);
 void view_text_free(view_text *t);
 
 /* Two columns of '\n'-separated lines, keys and values, on a dark band at the top left
