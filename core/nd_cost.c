@@ -10,9 +10,12 @@
  *   touches it, yet the last centimetres of pushing outvote it.
  * w_acc = 1e-5: a smoothing preference, small next to a centimetre of progress, that does
  *   not forbid the accelerations a push needs.
+ * prox_lead = 8 cm, about the box's half length plus the sphere's radius: the tie-break
+ *   then favours the side a push toward the goal starts from, so a sphere on the wrong side
+ *   goes around instead of hovering (doc/decisions.md#prox-lead).
  * The arithmetic: doc/decisions.md#cost-weights. */
 nd_cost_weights nd_cost_weights_default(void) {
-  nd_cost_weights w = {.w_rot = 2e-2, .w_prox = 5e-3, .w_acc = 1e-5};
+  nd_cost_weights w = {.w_rot = 2e-2, .w_prox = 5e-3, .w_acc = 1e-5, .prox_lead = 0.08};
   return w;
 }
 
@@ -31,9 +34,18 @@ double nd_cost_prox(const double obj_xy[2], const double ee_xy[2]) {
   return dx * dx + dy * dy;
 }
 
+void nd_cost_lead_point(double lead, const nd_goal *goal, const double obj_xy[2], double p[2]) {
+  const double gx = goal->x - obj_xy[0], gy = goal->y - obj_xy[1];
+  const double r = fmax(hypot(gx, gy), ND_COST_LEAD_FADE);
+  p[0] = obj_xy[0] - lead * gx / r;
+  p[1] = obj_xy[1] - lead * gy / r;
+}
+
 double nd_cost_plan(const nd_cost_weights *w, const nd_goal *goal, const double obj_xy[2],
                     double obj_yaw, const double ee_xy[2], double acc_sq_mean) {
-  return nd_task_error(w, goal, obj_xy, obj_yaw) + w->w_prox * nd_cost_prox(obj_xy, ee_xy) +
+  double lead[2];
+  nd_cost_lead_point(w->prox_lead, goal, obj_xy, lead);
+  return nd_task_error(w, goal, obj_xy, obj_yaw) + w->w_prox * nd_cost_prox(lead, ee_xy) +
          w->w_acc * acc_sq_mean;
 }
 

@@ -6,10 +6,16 @@
 #include "nd_goal.h"
 
 
-/* Weights of the plan cost E = L_pos + w_rot L_rot + w_prox L_prox + w_acc L_acc. */
+/* Weights of the plan cost E = L_pos + w_rot L_rot + w_prox L_prox + w_acc L_acc, and
+ * prox_lead (m): how far behind the object, seen from the goal, L_prox wants the sphere
+ * (0: at the object, the paper's term). */
 typedef struct {
-  double w_rot, w_prox, w_acc;
+  double w_rot, w_prox, w_acc, prox_lead;
 } nd_cost_weights;
+
+/* Within this distance of the goal's position the lead point fades into the object: the
+ * last pushes may come from any side, to turn it. */
+#define ND_COST_LEAD_FADE 0.05
 
 /* The project's default weights (nd_cost.c says why; the paper's l2, l3 are illegible). */
 nd_cost_weights nd_cost_weights_default(void);
@@ -23,7 +29,11 @@ double nd_cost_rot(double obj_yaw, const nd_goal *goal);
 /* L_prox = |obj - ee|^2 over (x, y). */
 double nd_cost_prox(const double obj_xy[2], const double ee_xy[2]);
 
-/* E of a rollout's final state; acc_sq_mean is L_acc, the mean of |a_ee|^2 over its steps. */
+/* The point L_prox draws the sphere to: obj - lead (goal - obj) / max(|goal - obj|,
+ * ND_COST_LEAD_FADE), i.e. where a push toward the goal starts. */
+void nd_cost_lead_point(double lead, const nd_goal *goal, const double obj_xy[2], double p[2]);
+
+/* E of a rollout's final state (L_prox to the lead point); acc_sq_mean is L_acc, the mean of |a_ee|^2 over its steps. */
 double nd_cost_plan(const nd_cost_weights *w, const nd_goal *goal, const double obj_xy[2],
                     double obj_yaw, const double ee_xy[2], double acc_sq_mean);
 

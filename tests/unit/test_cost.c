@@ -29,6 +29,34 @@ static void test_known_values(void **state) {
               0.01 * 0.0025, 1e-15);
 }
 
+/* The lead point: behind the object on the goal's line, fading into it near the goal. */
+static void test_lead_point(void **state) {
+  (void)state;
+  const nd_goal g = {.x = 0.5, .y = -0.2, .yaw = 0.0};
+  double p[2];
+  nd_cost_lead_point(0.08, &g, (const double[2]){0.8, 0.2}, p);
+  assert_near(p[0], 0.8 + 0.08 * 0.6, 1e-15);
+  assert_near(p[1], 0.2 + 0.08 * 0.8, 1e-15);
+  /* 2 cm from the goal: 0.4 of the lead; at the goal: the object itself. */
+  nd_cost_lead_point(0.08, &g, (const double[2]){0.52, -0.2}, p);
+  assert_near(p[0], 0.52 + 0.08 * 0.4, 1e-15);
+  assert_near(p[1], -0.2, 1e-15);
+  nd_cost_lead_point(0.08, &g, (const double[2]){0.5, -0.2}, p);
+  assert_near(p[0], 0.5, 0.0);
+  assert_near(p[1], -0.2, 0.0);
+  nd_cost_lead_point(0.0, &g, (const double[2]){0.8, 0.2}, p);
+  assert_near(p[0], 0.8, 0.0);
+  assert_near(p[1], 0.2, 0.0);
+  /* The plan cost charges the sphere's distance to it: behind the object (seen from the
+   * goal) costs nothing, the goal side twice the lead squared. */
+  nd_cost_weights w = {.w_rot = 0.0, .w_prox = 1.0, .w_acc = 0.0, .prox_lead = 0.08};
+  const double obj[2] = {0.8, 0.2};
+  const double behind[2] = {0.848, 0.264}, front[2] = {0.752, 0.136};
+  assert_near(nd_cost_plan(&w, &g, obj, 0.0, behind, 0.0), nd_cost_pos(obj, &g), 1e-15);
+  assert_near(nd_cost_plan(&w, &g, obj, 0.0, front, 0.0) - nd_cost_pos(obj, &g),
+              4.0 * 0.08 * 0.08, 1e-15);
+}
+
 static void test_cuboid_symmetry(void **state) {
   (void)state;
   const double pi = 3.14159265358979323846;
@@ -61,6 +89,8 @@ static void test_default_weights(void **state) {
    * (L_pos = 1e-2) must outweigh a 30 cm EE distance and a mean |a|^2 of 130 together. */
   assert_true(w.w_prox > 0.0 && w.w_acc > 0.0);
   assert_true(w.w_prox * 0.09 + w.w_acc * 130.0 < 1e-2);
+  /* The lead point sits about where a pushing sphere touches the 10 x 6 cm box. */
+  assert_true(w.prox_lead > 0.03 && w.prox_lead < 0.1);
   /* ...yet a quarter-turn yaw error alone fails the task at eps = 1e-2. */
   assert_true(w.w_rot * 1.0 > 1e-2);
 }
@@ -97,6 +127,7 @@ static void test_terminal_condition(void **state) {
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_known_values),
+      cmocka_unit_test(test_lead_point),
       cmocka_unit_test(test_cuboid_symmetry),
       cmocka_unit_test(test_default_weights),
       cmocka_unit_test(test_terminal_condition),
