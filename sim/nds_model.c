@@ -28,6 +28,24 @@ void nds_scene_cfg_default(nds_scene_cfg *cfg) {
   memcpy(cfg->theta, nd_theta_true, sizeof(cfg->theta));
 }
 
+/* nudge-calibrate --plan-dt 0.01 --pushes 256 --pop 48 --iters 10 (seed 1). */
+static const struct {
+  double dt, solref[2], solimp[3], tilt_damping;
+} plan_contact[] = {{0.01, {0.04191, 0.651}, {0.813, 0.8858, 0.002306}, 0.04021}};
+
+int nds_scene_cfg_planning(nds_scene_cfg *cfg, double dt) {
+  nds_scene_cfg_default(cfg);
+  cfg->timestep = dt;
+  for (size_t i = 0; i < sizeof(plan_contact) / sizeof(plan_contact[0]); i++) {
+    if (fabs(dt - plan_contact[i].dt) > 1e-12) continue;
+    memcpy(cfg->solref, plan_contact[i].solref, sizeof(cfg->solref));
+    memcpy(cfg->solimp, plan_contact[i].solimp, sizeof(cfg->solimp));
+    cfg->tilt_damping = plan_contact[i].tilt_damping;
+    return 1;
+  }
+  return 0;
+}
+
 static int positive(double v) { return isfinite(v) && v > 0; }
 
 int nds_scene_cfg_check(const nds_scene_cfg *cfg, char *err, int errlen) {

@@ -56,6 +56,12 @@ typedef struct {
   double ee_mass0, ee_inertia0[3], ee_body_invw0[2], ee_dof_invw0[2], ee_dof_M0[2];
 } nds_model;
 
+/* The planning model's scene at step dt: the defaults, except at 10 ms (the live
+ * planner's step), where MuJoCo's contact stepped that coarsely pushes the box ~2 cm too
+ * far over 0.6 s; there the contact softness and tilt damping nudge-calibrate fitted to the
+ * 1 ms world replace the world's (doc/decisions.md#plan-contact). Return 1 if they did. */
+int nds_scene_cfg_planning(nds_scene_cfg *cfg, double dt);
+
 /* Check cfg: finite positive sizes and masses, timestep in (0, 0.05] s, condim 3, 4 or 6,
  * the sphere centre below the object top, theta valid. Return 0, or -1 naming the value. */
 int nds_scene_cfg_check(const nds_scene_cfg *cfg, char *err, int errlen);

@@ -17,8 +17,7 @@ int nds_setup_init(nds_setup *s, double plan_dt, int threads, char *err, int err
   memset(s, 0, sizeof(*s));
   nds_scene_cfg wc, pc;
   nds_scene_cfg_default(&wc);
-  pc = wc;
-  pc.timestep = plan_dt;
+  nds_scene_cfg_planning(&pc, plan_dt);
   if (nds_model_init(&s->world, &wc, err, errlen) || nds_model_init(&s->plan, &pc, err, errlen) ||
       !(s->pool = nd_pool_create(threads, err, errlen)))
     goto fail;

@@ -35,7 +35,8 @@ int main(int argc, char **argv) {
       {"pop", ND_OPT_INT, &o.pop, 4, 100000, .help = "iCEM population N (the paper's robot setting)"},
       {"iters", ND_OPT_INT, &o.iters, 1, 100, .help = "iCEM iterations C (the paper's robot setting)"},
       {"plan-dt", ND_OPT_DOUBLE, &o.plan_dt, 1e-4, 0.01, .arg = "S",
-       .help = "planning model timestep (the tracking controller is stable up to 10 ms); see "
+       .help = "planning model timestep (the tracking controller is stable up to 10 ms); at "
+               "10 ms its contact is calibrated to the 1 ms world (nudge-calibrate); see "
                "nudge-bench for its prediction error"},
       {"seed", ND_OPT_U64, &o.seed, .help = "planner seed"},
       {"lead", ND_OPT_CHOICE, &o.lead, .choices = lead_words, .arg = "on|off", .def = "on",
@@ -91,8 +92,7 @@ int main(int argc, char **argv) {
   p.st.state = "idle";
 
   nds_scene_cfg sc;
-  nds_scene_cfg_default(&sc);
-  sc.timestep = o.plan_dt;
+  const int calibrated = nds_scene_cfg_planning(&sc, o.plan_dt);
   memcpy(sc.theta, o.theta, sizeof(sc.theta));
   pc.pop = o.pop;
   pc.iters = o.iters;
@@ -128,10 +128,11 @@ int main(int argc, char **argv) {
   nd_objest_init(&p.est, &ec);
 
   fprintf(stderr,
-          PROG ": %s, iCEM N %d C %d, M %d, T %.2f s, plan dt %.4f s, %d worker(s), max %.1f "
+          PROG ": %s, iCEM N %d C %d, M %d, T %.2f s, plan dt %.4f s (%s contact), %d worker(s), max %.1f "
           "plans/s, lead %s, arm %s (load <= %g), state timeout %.3f s, theta (%g, %g, %g, %g), seed %llu, keypoints in "
           "x [%g, %g] y [%g, %g] m, v_max %g m/s, a_max %g m/s^2\n",
-          ndp_url(o.url), o.pop, o.iters, pc.M, pc.T, o.plan_dt, o.threads, o.max_rate,
+          ndp_url(o.url), o.pop, o.iters, pc.M, pc.T, o.plan_dt,
+          calibrated ? "calibrated" : "the world's", o.threads, o.max_rate,
           lead_words[o.lead], arm_words[arm], pc.reach_max, o.state_timeout, o.theta[0], o.theta[1], o.theta[2], o.theta[3],
           (unsigned long long)o.seed, pc.ws_lo[0], pc.ws_hi[0], pc.ws_lo[1], pc.ws_hi[1],
           pc.v_max, pc.a_max);

@@ -27,7 +27,7 @@ PT_NAME=test_cli
 
 BUILD=${1:?usage: test_cli.sh BUILD_DIR}
 BIN=$(cd "$BUILD/bin" && pwd) || exit 1
-for p in bridge executor planner adapter tasks status demo experiment bench up spy; do
+for p in bridge executor planner adapter tasks status demo experiment bench calibrate up spy; do
   [[ -x $BIN/nudge-$p ]] || { echo "test_cli: $BIN/nudge-$p is missing: build first" >&2; exit 1; }
 done
 PT_WORK=$(mktemp -d "${TMPDIR:-/tmp}/nudge-test_cli.XXXXXX") || exit 1
@@ -178,7 +178,7 @@ walk() { # PROG: the generic cases of every option in PROG's table
     esac
   done < <("$BIN/$prog" --list-options)
 }
-for p in bridge executor planner adapter tasks status demo experiment bench; do
+for p in bridge executor planner adapter tasks status demo experiment bench calibrate; do
   walk "nudge-$p"
 done
 pt_check "the option tables list options ($NOPTS)" test "$NOPTS" -gt 80
