@@ -32,7 +32,7 @@ int main(int argc, char **argv) {
     io.buf = &buf;
   }
   const char *url = ndp_url(cfg.url);
-  int status = 1, ran = 0, reached = 0, attempted = 0, stops = 0;
+  int status = 1, ran = 0, reached = 0, attempted = 0, stops = 0, met = 0;
   double t_sum = 0.0, pos_sum = 0.0, task_s = 0.0, obj_path = 0.0, ee_path = 0.0;
   int64_t plans = 0;
   static double reach_t[MAX_GOALS], ages[MAX_PLAN_AGES];
@@ -70,6 +70,7 @@ int main(int argc, char **argv) {
     pos_sum += rejected ? 0.0 : r.pos_err;
     if (r.event == NUDGE_EPISODE_T_EVENT_SUCCESS) reach_t[reached++] = r.time, t_sum += r.time;
     stops += r.event == NUDGE_EPISODE_T_EVENT_STOPPED;
+    met += r.met_at_start;
     task_s += rejected ? 0.0 : r.time;
     plans += r.plans;
     obj_path += r.obj_path;
@@ -90,7 +91,7 @@ int main(int argc, char **argv) {
     printf("object_path_mean %.3f m\nsphere_path_mean %.3f m\n", obj_path / attempted,
            ee_path / attempted);
   }
-  printf("reflex_stops %d count\n", stops);
+  printf("reflex_stops %d count\ntasks_met_at_start %d count\n", stops, met);
   if (task_s > 0) printf("plan_rate_hz %.1f Hz\n", (double)plans / task_s);
   if (io.nages) {
     printf("plan_age_ms_p50 %.1f ms\n", nd_quantile(ages, io.nages, 0.5));

@@ -101,7 +101,14 @@ int tasks_run(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, const nd_goal *g, in
   t.goal_yaw = g->yaw;
   t.eps = eps;
   t.time_limit = tau;
-  if (io->buf && !io->no_record) tasks_buffer_begin(io->buf, &io->last, id, &goal);
+  /* A goal met where the object lies is reached at once: its record would hold no push,
+   * and a refit on it has nothing to learn from but may still move theta. */
+  r->met_at_start = nd_task_check(r->task_error, 0.0, eps, tau) == ND_TASK_SUCCESS;
+  if (r->met_at_start && io->buf)
+    fprintf(stderr, PROG ": task %lld not recorded: its goal is met at the start (task error "
+            "%.3g < eps %.3g), nothing to push\n", (long long)id, r->task_error, eps);
+  if (io->buf && !io->no_record && !r->met_at_start)
+    tasks_buffer_begin(io->buf, &io->last, id, &goal);
   memset(&io->run, 0, sizeof(io->run));
   io->run.id = id;
   const double t0 = ndp_mono();

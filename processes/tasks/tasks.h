@@ -116,6 +116,7 @@ typedef struct {
   double yaw_err;    /* rad, modulo the cuboid's half-turn, in [0, pi/2] */
   int64_t plans;     /* PLANs received for the task */
   double obj_path, ee_path;  /* m */
+  int met_at_start;  /* the goal was met before anything moved: nothing recorded */
   char reason[200];
 } tasks_result;
 

@@ -9,7 +9,8 @@
 # Goals follow the default chain with eps 2.5e-3, tau 2 s, so every task is a real push.
 #
 # 0. seed: one task recorded into a buffer on a 1 MiB tmpfs, so the file holds a record
-#    written by the real recorder before trouble starts;
+#    written by the real recorder before trouble starts; then a goal met where the object
+#    lies (eps 1): reached at once, not recorded (no push to learn from), said so;
 # 1. disk full: a dummy file fills the tmpfs; two tasks;
 # 2. read-only: a copy of the seeded buffer behind a read-only bind mount; two tasks;
 # 3. read-only, then writable again: the mount turns read-write after the first task's
@@ -117,6 +118,19 @@ n_seed=$(records "$BUF")
 pt_check "seed: one record in the buffer on the tmpfs (got ${n_seed:-unreadable})" test "${n_seed:-0}" -eq 1
 pt_figure seed_duration $((($(pt_now_us) - t0) / 1000)) ms
 ((n_seed == 1)) || exit 1   # the rest compares against it
+pt_check "seed: its goal was not met at the start" \
+  test "$(figure tasks_met_at_start "$PT_WORK/seed.out")" = 0
+
+# --- 0b. a goal met where the object lies (eps 1 holds anywhere) --------------------------
+tasks met "$BUF" 0,0,0,1
+finish met
+cat "$PT_WORK/met.out"
+pt_check "met: nudge-tasks exits 0 (got $PT_RC)" test "$PT_RC" -eq 0
+pt_check "met: reached at once and counted as met at the start" \
+  test "$(grep -c '^reached 1/1 goals' "$PT_WORK/met.out")$(figure tasks_met_at_start "$PT_WORK/met.out")" = 11
+pt_check "met: it says why it records nothing" \
+  grep -qE '^nudge-tasks: task [0-9]+ not recorded: its goal is met at the start \(task error [0-9.e-]+ < eps 1\), nothing to push$' "$PT_WORK/met.err"
+pt_check "met: nothing appended (still one record)" test "$(records "$BUF")" = 1
 
 # --- 1. disk full ----------------------------------------------------------------------
 dd if=/dev/zero of="$FULL/filler" bs=4k status=none 2>/dev/null
