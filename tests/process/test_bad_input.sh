@@ -59,6 +59,8 @@ has_beat_after() { # NAME UTIME
   "$PT_LC" status "$LOG" "$1" --after-utime "$2" >/dev/null 2>&1
 }
 
+# 0.2 s, scaled by NUDGE_SLOW: sanitized plans take several times as long.
+LATE_US=$(awk -v s="$(pt_slow 0.2)" 'BEGIN { printf "%d", s * 1e6 }')
 t_first=""
 for ch in "${CHANNELS[@]}"; do
   a=$(pt_now_us)
@@ -69,15 +71,15 @@ for ch in "${CHANNELS[@]}"; do
   ngar=$(awk -v k="inject_${ch}_garbage" '$1 == k { print $2 }' <<<"$out")
   pt_figure "inject_${ch}_bad" "${nbad:-0}" count
   pt_figure "inject_${ch}_garbage" "${ngar:-0}" count
-  # A heartbeat 0.2 s after the burst counts it: the planner handles input between plans
+  # A heartbeat LATE_US after the burst counts it: the planner handles input between plans
   # (<= ~50 ms each) and publishes its heartbeat after that.
   for name in ${READERS[$ch]}; do
-    if ! pt_wait_for 4 has_beat_after "$name" $((b + 200000)); then
+    if ! pt_wait_for 4 has_beat_after "$name" $((b + LATE_US)); then
       pt_fail "$ch: no heartbeat of $name after the burst"
       continue
     fi
     pt_val r0 status "$LOG" "$name" --before-utime "$a" rejected
-    pt_val r1 status "$LOG" "$name" --after-utime $((b + 200000)) rejected
+    pt_val r1 status "$LOG" "$name" --after-utime $((b + LATE_US)) rejected
     d=$(( ${r1:-0} - ${r0:-0} ))
     pt_figure "rejected_${ch}_${name#nudge-}" "$d" count
     pt_check "$ch: $name counted each of the ${nbad:-?} bad and ${ngar:-?} undecodable messages (rejected +$d)" \
@@ -145,10 +147,10 @@ ws_case() { # CHANNEL PROCESS REPEAT GAP_MS; sets ws_cmd_from/to around an EE_CM
   [[ $ch == EE_CMD ]] && ws_cmd_to=$b
   n=$(awk -v k="inject_${ch}_workspace" '$1 == k { print $2 }' <<<"$out")
   pt_figure "inject_${ch}_workspace" "${n:-0}" count
-  pt_wait_for 4 has_beat_after "$name" $((b + 200000)) ||
+  pt_wait_for 4 has_beat_after "$name" $((b + LATE_US)) ||
     pt_fail "$ch outside the workspace: no heartbeat of $name after the burst"
   pt_val r0 status "$LOG" "$name" --before-utime "$a" rejected
-  pt_val r1 status "$LOG" "$name" --after-utime $((b + 200000)) rejected
+  pt_val r1 status "$LOG" "$name" --after-utime $((b + LATE_US)) rejected
   d=$(( ${r1:-0} - ${r0:-0} ))
   pt_figure "rejected_${ch}_workspace_${name#nudge-}" "$d" count
   pt_check "$ch outside the workspace: $name refused and counted each of the ${n:-?} (rejected +$d)" \
