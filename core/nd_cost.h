@@ -26,14 +26,15 @@ double nd_cost_pos(const double obj_xy[2], const nd_goal *goal);
 /* L_rot = sin^2(yaw - goal yaw): zero at the goal yaw and at goal yaw + pi (cuboid symmetry). */
 double nd_cost_rot(double obj_yaw, const nd_goal *goal);
 
-/* L_prox = |obj - ee|^2 over (x, y). */
+/* |obj - ee|^2 over (x, y); L_prox is it with the lead point for obj. */
 double nd_cost_prox(const double obj_xy[2], const double ee_xy[2]);
 
 /* The point L_prox draws the sphere to: obj - lead (goal - obj) / max(|goal - obj|,
  * ND_COST_LEAD_FADE), i.e. where a push toward the goal starts. */
 void nd_cost_lead_point(double lead, const nd_goal *goal, const double obj_xy[2], double p[2]);
 
-/* E of a rollout's final state (L_prox to the lead point); acc_sq_mean is L_acc, the mean of |a_ee|^2 over its steps. */
+/* E of a rollout's final state (L_prox from the lead point); acc_sq_mean is L_acc, the
+ * mean of |a_ee|^2 over its steps. */
 double nd_cost_plan(const nd_cost_weights *w, const nd_goal *goal, const double obj_xy[2],
                     double obj_yaw, const double ee_xy[2], double acc_sq_mean);
 

@@ -28,7 +28,7 @@ void nds_scene_cfg_default(nds_scene_cfg *cfg) {
   memcpy(cfg->theta, nd_theta_true, sizeof(cfg->theta));
 }
 
-/* nudge-calibrate --plan-dt 0.01 --pushes 256 --pop 48 --iters 10 (seed 1). */
+/* What `nudge-calibrate --plan-dt S` prints (its other options at their defaults). */
 static const struct {
   double dt, solref[2], solimp[3], tilt_damping;
 } plan_contact[] = {{0.01, {0.04191, 0.651}, {0.813, 0.8858, 0.002306}, 0.04021}};

@@ -57,8 +57,8 @@ typedef struct {
 } nds_model;
 
 /* The planning model's scene at step dt: the defaults, except at 10 ms (the live
- * planner's step), where MuJoCo's contact stepped that coarsely pushes the box ~2 cm too
- * far over 0.6 s; there the contact softness and tilt damping nudge-calibrate fitted to the
+ * planner's step), where MuJoCo's contact stepped that coarsely pushes the box ~2.4 cm
+ * too far over 0.6 s; there the contact softness and tilt damping nudge-calibrate fitted to the
  * 1 ms world replace the world's (doc/decisions.md#plan-contact). Return 1 if they did. */
 int nds_scene_cfg_planning(nds_scene_cfg *cfg, double dt);
 

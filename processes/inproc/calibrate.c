@@ -1,12 +1,13 @@
 /* nudge-calibrate: fit the planning model's contact softness to the 1 ms world.
  *
  * A coarse step changes what MuJoCo's soft contacts do: stepped at 10 ms with the world's
- * own solref, solimp and tilt damping, the box slides ~2.5 cm too far over a 0.6 s push.
+ * own solref, solimp and tilt damping, the box slides ~2.4 cm too far over a 0.6 s push.
  * This program draws pushes from random starts around a yawed box, rolls each out in the
  * 1 ms world (the truth) and in the planning model at --plan-dt, and searches the planning
  * model's contact values with the project's CEM for the least prediction error. It checks
  * the result on pushes it was not fitted on, a second friction included, and prints the
- * values sim/nds_model.c tabulates (doc/decisions.md#plan-contact). */
+ * values sim/nds_model.c tabulates, from this program's defaults
+ * (doc/decisions.md#plan-contact). */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -18,7 +19,6 @@
 #include "nd_rng.h"
 #include "nd_stats.h"
 #include "nds_rollout.h"
-#include "nds_setup.h"
 
 #define PROG "nudge-calibrate"
 #define NDIM 6 /* log solref0, log solref1, solimp0, solimp1 - solimp0, log width, log tilt */
@@ -32,7 +32,7 @@ typedef struct {
 } push;
 
 typedef struct {
-  const nds_setup *su;
+  const nds_scene_cfg *world;  /* what the search varies the contact of */
   nds_ctrl_cfg ctrl;
   push *train;
   int n;
@@ -65,7 +65,7 @@ static void draw_pushes(const nds_model *world, mjData *d, const nds_ctrl_cfg *c
 /* The scene cfg a search vector stands for. */
 static void cfg_of(const double *x, double dt, nds_scene_cfg *c) {
   c->timestep = dt;
-  c->solref[0] = fmax(exp(x[0]), 2.0 * dt); /* MuJoCo's own floor (mjDSBL_REFSAFE) */
+  c->solref[0] = exp(x[0]);
   c->solref[1] = exp(x[1]);
   c->solimp[0] = x[2];
   c->solimp[1] = fmin(x[2] + x[3], 0.995);
@@ -116,7 +116,7 @@ static int pred_error(const nds_scene_cfg *c, const nds_ctrl_cfg *ctrl, const pu
 static int fit_cost(void *ctx, const double *x, int n, double *cost) {
   const fit_ctx *f = ctx;
   for (int i = 0; i < n; i++) {
-    nds_scene_cfg c = f->su->world.cfg;
+    nds_scene_cfg c = *f->world;
     cfg_of(x + NDIM * i, f->dt, &c);
     pred_err e;
     cost[i] = pred_error(&c, &f->ctrl, f->train, f->n, &e) ? INFINITY : e.score;
@@ -131,7 +131,7 @@ static void report(const char *what, const pred_err *e) {
 
 int main(int argc, char **argv) {
   double dt = 0.01;
-  int npush = 128, pop = 32, iters = 8;
+  int npush = 256, pop = 48, iters = 10;
   uint64_t seed = 1;
   nd_opt opts[] = {
       {"plan-dt", ND_OPT_DOUBLE, &dt, 0.002, 0.01, .arg = "S", .help = "planning model timestep"},
@@ -152,16 +152,14 @@ int main(int argc, char **argv) {
   nd_rfile_umask_no_world_write();
 
   char err[512];
-  nds_setup su;
-  if (nds_setup_init(&su, dt, 1, err, sizeof(err))) {
-    fprintf(stderr, PROG ": %s\n", err);
-    return 1;
-  }
   int status = 1;
-  fit_ctx f = {.su = &su, .n = npush, .dt = dt};
+  nds_scene_cfg wc; /* the 1 ms world */
+  nds_scene_cfg_default(&wc);
+  fit_ctx f = {.world = &wc, .n = npush, .dt = dt};
   nds_ctrl_cfg_default(&f.ctrl);
   push *p = calloc(3 * (size_t)npush, sizeof(*p));
-  nds_model slow = {0};
+  nds_model world = {0}, slow = {0};
+  mjData *d = NULL, *ds = NULL;
   nd_cem *cem = NULL;
   if (!p) {
     fprintf(stderr, PROG ": out of memory for %d pushes\n", npush);
@@ -170,20 +168,19 @@ int main(int argc, char **argv) {
   f.train = p;
   /* Fitted on, checked on (same friction), checked on at half the sliding friction. */
   push *check = p + npush, *half = p + 2 * npush;
-  draw_pushes(&su.world, su.d, &f.ctrl, seed, f.train, npush);
-  draw_pushes(&su.world, su.d, &f.ctrl, seed + 1000, check, npush);
-  nds_scene_cfg sc = su.world.cfg;
+  nds_scene_cfg sc = wc;
   sc.theta[ND_TH_SLIDE] *= 0.5;
-  if (nds_model_init(&slow, &sc, err, sizeof(err))) {
+  if (nds_model_init(&world, &wc, err, sizeof(err)) ||
+      nds_model_init(&slow, &sc, err, sizeof(err))) {
     fprintf(stderr, PROG ": %s\n", err);
     goto done;
   }
-  mjData *ds = mj_makeData(slow.m);
-  if (!ds) goto done;
+  if (!(d = mj_makeData(world.m)) || !(ds = mj_makeData(slow.m))) goto done;
+  draw_pushes(&world, d, &f.ctrl, seed, f.train, npush);
+  draw_pushes(&world, d, &f.ctrl, seed + 1000, check, npush);
   draw_pushes(&slow, ds, &f.ctrl, seed + 2000, half, npush);
-  mj_deleteData(ds);
 
-  nds_scene_cfg def = su.world.cfg; /* the world's contact at the planning step */
+  nds_scene_cfg def = wc; /* the world's contact at the planning step */
   def.timestep = dt;
   const double lo[NDIM] = {log(2.0 * dt), log(0.2), 0.5, 0.0, log(1e-4), log(0.01)};
   const double hi[NDIM] = {log(0.2), log(5.0), 0.99, 0.2, log(0.05), log(5.0)};
@@ -226,9 +223,10 @@ int main(int argc, char **argv) {
   report("other pushes, fitted contact:", &e[3]);
   report("half friction, world's contact:", &e[4]);
   report("half friction, fitted contact:", &e[5]);
-  printf("contact_solref %.4g %.4g s,ratio\n", fit.solref[0], fit.solref[1]);
-  printf("contact_solimp %.4g %.4g %.4g ratio,ratio,m\n", fit.solimp[0], fit.solimp[1],
-         fit.solimp[2]);
+  printf("contact_solref_timeconst %.4g s\ncontact_solref_dampratio %.4g ratio\n",
+         fit.solref[0], fit.solref[1]);
+  printf("contact_solimp_d0 %.4g ratio\ncontact_solimp_dwidth %.4g ratio\n"
+         "contact_solimp_width %.4g m\n", fit.solimp[0], fit.solimp[1], fit.solimp[2]);
   printf("contact_tilt_damping %.4g N_m_s/rad\n", fit.tilt_damping);
   printf("pred_err_check_default_mm %.1f mm\n", 1e3 * e[2].pos_med);
   printf("pred_err_check_fitted_mm %.1f mm\n", 1e3 * e[3].pos_med);
@@ -237,8 +235,10 @@ int main(int argc, char **argv) {
   status = 0;
 done:
   nd_cem_free(cem);
+  mj_deleteData(d);
+  mj_deleteData(ds);
   nds_model_free(&slow);
+  nds_model_free(&world);
   free(p);
-  nds_setup_free(&su);
   return status;
 }

@@ -126,8 +126,9 @@ tasks met "$BUF" 0,0,0,1
 finish met
 cat "$PT_WORK/met.out"
 pt_check "met: nudge-tasks exits 0 (got $PT_RC)" test "$PT_RC" -eq 0
-pt_check "met: reached at once and counted as met at the start" \
-  test "$(grep -c '^reached 1/1 goals' "$PT_WORK/met.out")$(figure tasks_met_at_start "$PT_WORK/met.out")" = 11
+pt_check "met: reached at once" grep -q '^reached 1/1 goals' "$PT_WORK/met.out"
+pt_check "met: counted as met at the start" \
+  test "$(figure tasks_met_at_start "$PT_WORK/met.out")" = 1
 pt_check "met: it says why it records nothing" \
   grep -qE '^nudge-tasks: task [0-9]+ not recorded: its goal is met at the start \(task error [0-9.e-]+ < eps 1\), nothing to push$' "$PT_WORK/met.err"
 pt_check "met: nothing appended (still one record)" test "$(records "$BUF")" = 1

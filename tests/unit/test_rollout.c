@@ -4,6 +4,7 @@
 #include <string.h>
 
 #include "nd_math.h"
+#include "nd_rng.h"
 #include "nd_snap.h"
 #include "nd_stats.h"
 #include "nd_test.h"
@@ -391,15 +392,13 @@ static void test_planning_contact(void **state) {
   mjData *d = mj_makeData(world.m);
   nds_ctrl_cfg ctrl;
   nds_ctrl_cfg_default(&ctrl);
-  enum { N = 128 };
+  enum { N = 256 };
   double e_coarse[N], e_cal[N];
-  uint64_t rng = 7;
+  nd_rng rng;
+  nd_rng_seed(&rng, 7, 0);
   for (int i = 0; i < N; i++) {
     double u[4];
-    for (int j = 0; j < 4; j++) {
-      rng = rng * 6364136223846793005ULL + 1442695040888963407ULL;
-      u[j] = (double)(rng >> 11) / 9007199254740992.0;
-    }
+    for (int j = 0; j < 4; j++) u[j] = nd_rng_uniform(&rng);
     /* The sphere 8 cm out at a bearing, pushed through the box up to 2.5 cm off centre. */
     const double a = 2.0 * M_PI * u[0], dir = a + M_PI, lat = 0.05 * (u[1] - 0.5);
     const double reach = 0.06 + 0.1 * u[2], c = cos(dir), sn = sin(dir);
