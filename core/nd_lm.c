@@ -179,20 +179,32 @@ int nd_lm_run(nd_lm *lm, nd_lm_fn fn, void *ctx, double *x, nd_lm_out *out, char
     }
   }
   out->cost = cost;
-  out->sigma2 = cost / (m - n);
   out->rho = c->stride > 0 ? lag_correlation(lm->r0, m, c->stride) : 0.0;
   const double rho = clampd(out->rho, 0.0, 0.98);
   out->inflation = c->stride > 0 ? fmin((1 + rho) / (1 - rho), 100.0) : 1.0;
-  /* Covariance: the inverse of J'J column by column, in physical units. */
+  /* Covariance: the inverse of J'J column by column, in physical units, over the
+   * parameters the residuals depend on; one they do not (a zero column: no difference
+   * at the step) has an infinite std and no covariance with the others. */
   normal_eq(lm, A, g);
-  out->rank_ok = 1;
-  for (int b = 0; b < n && out->rank_ok; b++) {
-    double M[N_MAX * N_MAX], col[N_MAX] = {0};
-    memcpy(M, A, sizeof(double) * n * n);
-    col[b] = 1.0;
-    if (spd_solve(M, n, col)) out->rank_ok = 0;
-    for (int a = 0; a < n; a++)
-      out->cov[a * n + b] = col[a] * out->sigma2 * out->inflation * lm->scale[a] * lm->scale[b];
+  int informed[N_MAX], k = 0, at[N_MAX];
+  for (int a = 0; a < n; a++) {
+    informed[a] = A[a * n + a] > 0;
+    if (informed[a]) at[k++] = a;
+  }
+  out->sigma2 = cost / (m - k);  /* an ignored parameter takes no degree of freedom */
+  out->rank_ok = k > 0;
+  for (int a = 0; a < n * n; a++) out->cov[a] = 0.0;
+  for (int bi = 0; bi < k && out->rank_ok; bi++) {
+    double R[N_MAX * N_MAX], col[N_MAX] = {0};
+    for (int i = 0; i < k; i++)
+      for (int j = 0; j < k; j++) R[i * k + j] = A[at[i] * n + at[j]];
+    col[bi] = 1.0;
+    if (spd_solve(R, k, col)) out->rank_ok = 0;
+    const int b = at[bi];
+    for (int ai = 0; ai < k; ai++) {
+      const int a = at[ai];
+      out->cov[a * n + b] = col[ai] * out->sigma2 * out->inflation * lm->scale[a] * lm->scale[b];
+    }
   }
   for (int a = 0; a < n; a++) {
     if (!out->rank_ok) {
@@ -200,6 +212,7 @@ int nd_lm_run(nd_lm *lm, nd_lm_fn fn, void *ctx, double *x, nd_lm_out *out, char
       out->std[a] = NAN;
       continue;
     }
+    if (!informed[a]) out->cov[a * n + a] = INFINITY;
     out->std[a] = sqrt(out->cov[a * n + a]);
   }
   return 0;

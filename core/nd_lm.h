@@ -38,12 +38,15 @@ typedef struct {
   double cost0, cost;  /* |r|^2 at the start and at the result */
   int iters, evals;    /* iterations and points evaluated */
   int accepted;        /* steps taken */
-  double sigma2;       /* |r|^2 / (m - n) at the result */
+  double sigma2;       /* |r|^2 / (m - k) at the result, k the parameters r depends on */
   double rho;          /* lag correlation of the residuals (0 without stride) */
   double inflation;    /* (1 + rho) / (1 - rho), capped at 100; 1 without stride */
-  double cov[256];     /* n x n covariance of the result (row-major), inflated */
+  double cov[256];     /* n x n covariance of the result (row-major), inflated; a
+                          parameter the residuals do not depend on (a zero column of J)
+                          has an infinite variance and zero covariance with the others */
   double std[16];      /* its square-root diagonal: standard errors */
-  int rank_ok;         /* J'J was invertible (else cov and std are NaN) */
+  int rank_ok;         /* J'J over the other parameters was invertible (else cov and std
+                          are NaN) */
 } nd_lm_out;
 
 typedef struct nd_lm nd_lm;

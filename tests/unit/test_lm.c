@@ -2,7 +2,8 @@
  * converges on a curve fit from a far start within its iterations, keeps to its bounds, and
  * its 95 % intervals hold the truth about 95 % of the time, for white residuals and, with
  * the correlation correction, for correlated ones. With no iterations it evaluates one batch
- * and gives the covariance at the start point, which it leaves unchanged. */
+ * and gives the covariance at the start point, which it leaves unchanged. A parameter the
+ * residuals ignore gets an infinite std and leaves the others' alone. */
 #include <string.h>
 
 #include "nd_test.h"
@@ -137,11 +138,51 @@ static void test_cov_only(void **state) {
   nd_lm_free(cov);
 }
 
+/* The curve with a fourth parameter it does not depend on. */
+static int residuals4(void *ctx, const double *x, int k, double *r) {
+  fit *f = ctx;
+  for (int p = 0; p < k; p++)
+    for (int j = 0; j < M; j++) r[p * M + j] = model(x + 4 * p, j) - f->y[j];
+  return 0;
+}
+
+/* A parameter the residuals ignore has an infinite std; the others' intervals are those of
+ * the fit without it. */
+static void test_uninformed(void **state) {
+  (void)state;
+  static fit f;
+  nd_rng r;
+  nd_rng_seed(&r, 7, 0);
+  data(&f, &r, 0.02, 0.0);
+  const double lo4[4] = {0, 0.01, -1, -1}, hi4[4] = {10, 10, 1, 1}, sc4[4] = {1, 1, 0.1, 1};
+  nd_lm_cfg c;
+  nd_lm_cfg_default(&c);
+  c.n = 4, c.m = M, c.lower = lo4, c.upper = hi4, c.scale = sc4, c.iters = 8;
+  char err[128];
+  nd_lm *lm4 = nd_lm_create(&c, err, sizeof err), *lm3 = make(0, 8);
+  assert_non_null(lm4);
+  double x4[4] = {1.8, 1.3, 0.35, 0.5}, x3[3] = {1.8, 1.3, 0.35};
+  nd_lm_out o4, o3;
+  assert_int_equal(nd_lm_run(lm4, residuals4, &f, x4, &o4, err, sizeof err), 0);
+  assert_int_equal(nd_lm_run(lm3, residuals, &f, x3, &o3, err, sizeof err), 0);
+  assert_true(o4.rank_ok);
+  assert_true(isinf(o4.std[3]));
+  assert_near(x4[3], 0.5, 0);
+  for (int i = 0; i < 3; i++) {
+    assert_near(x4[i], x3[i], 1e-6);
+    assert_true(isfinite(o4.std[i]) && fabs(o4.std[i] / o3.std[i] - 1) < 1e-3);
+    assert_near(o4.cov[i * 4 + 3], 0, 0);
+  }
+  nd_lm_free(lm4);
+  nd_lm_free(lm3);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_converges),
       cmocka_unit_test(test_intervals),
       cmocka_unit_test(test_cov_only),
+      cmocka_unit_test(test_uninformed),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
