@@ -51,6 +51,11 @@
  * budget; it stays an option (doc/decisions.md#robust-score). */
 #define NDS_FIT_ROBUST 0.0
 
+/* The refinement's difference step, in sigma0: a replay's contact events make its
+ * residuals rough at finer steps (0.02 refused most LM steps), and a difference over them
+ * is noise; 0.5 is ~6 % of sliding friction at D = 1 (doc/decisions.md#lm-step). */
+#define NDS_FIT_LM_FD 0.5
+
 /* Default prior width: the paper's smaller uncertainty, D = 0.2. */
 #define NDS_FIT_D_DEFAULT 0.2
 
@@ -78,6 +83,7 @@ void nds_fit_cfg_default(nds_fit_cfg *cfg) {
   cfg->k1 = NDS_FIT_K1;
   cfg->k2 = NDS_FIT_K2;
   cfg->robust = NDS_FIT_ROBUST;
+  cfg->lm_fd = NDS_FIT_LM_FD;
   cfg->prune = 1;
   nds_replay_cfg_default(&cfg->replay, NDS_FIT_MODE_DEFAULT);
   cfg->replay.window = NDS_FIT_WINDOW;
@@ -142,6 +148,10 @@ int nds_fit_cfg_check(const nds_fit_cfg *c, char *err, int errlen) {
   }
   if (c->lm_iters < 0 || c->lm_iters > 50) {
     snprintf(err, errlen, "fit: lm_iters = %d, must be in [0, 50]", c->lm_iters);
+    return -1;
+  }
+  if (!(c->lm_fd > 0 && c->lm_fd <= 10)) {
+    snprintf(err, errlen, "fit: lm_fd = %g, must be in (0, 10]", c->lm_fd);
     return -1;
   }
   /* What the first candidate sees: fitted entries at their clipped prior mean. */

@@ -60,6 +60,9 @@ typedef struct {
   int lm_iters;                /* > 0: after CEM, at most this many Levenberg-Marquardt
                                   iterations on the replays' residuals from CEM's mean, which
                                   also give a covariance (nds_fit_out.lm_*); 0: off */
+  double lm_fd;                /* its forward-difference step in units of sigma0: 0.5 by
+                                  default, through the roughness contact events give the
+                                  replays; records the model replays exactly take 0.02 */
   uint64_t seed;
 } nds_fit_cfg;
 
@@ -68,7 +71,7 @@ typedef struct {
  * k2 = 1e-3 m^2/rad; prune; seed 1. Beyond the paper (nds_fit.c; doc/decisions.md):
  * step_std 2 gated at 0.75 std, std_floor 0.25, rel_floor 0.05, FORCE replay re-anchored
  * on the observed full pose every 5 ms with the default controller, candidates ranked by
- * L (robust 0), no Levenberg-Marquardt refinement (lm_iters 0). */
+ * L (robust 0), no Levenberg-Marquardt refinement (lm_iters 0; lm_fd 0.5). */
 void nds_fit_cfg_default(nds_fit_cfg *cfg);
 
 /* Check cfg. Return 0, or -1 naming the bad field. */

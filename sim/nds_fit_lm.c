@@ -24,11 +24,6 @@
 /* A residual for a replay that diverged: a metre, far above any real error. */
 #define DIVERGED_RESIDUAL 1.0
 
-/* Forward-difference step in the fit's space (units of sigma0): rough enough that the
- * replays' contact events do not turn the difference into noise, fine next to the
- * basin CEM leaves (a few sigma0). */
-#define FD_STEP 0.02
-
 typedef struct {
   nds_fit *f;
   const nd_rollout *rs;
@@ -134,7 +129,7 @@ static int lm_solve(nds_fit *f, const nd_rollout *rs, int n, int iters,
   lc.lower = lo;
   lc.upper = hi;
   lc.scale = sc;
-  lc.fd_step = FD_STEP;
+  lc.fd_step = f->cfg.lm_fd;
   lc.stride = COLS;
   if (!(lm = nd_lm_create(&lc, err, errlen))) goto done;
   nd_lm_out lo_out;

@@ -200,8 +200,8 @@ static int world_pushes(const nds_world_cfg *base, const double *keys, int n, in
 static int bench_refine(const nds_scene_cfg *wc, const nd_rollout *recs, int nrec,
                         nd_pool *pool) {
   enum { NSEED = 3, NCFG = 2 };
-  static const int pop[NCFG] = {32, 16}, iters[NCFG] = {2, 1}, lm[NCFG] = {0, 4};
-  static const char *const name[NCFG] = {"cem", "lm4"};
+  static const int pop[NCFG] = {32, 4}, iters[NCFG] = {2, 1}, lm[NCFG] = {0, 3};
+  static const char *const name[NCFG] = {"cem", "lm"};
   double reps[NCFG][NSEED], e_s[NCFG][NSEED], e_t[NCFG][NSEED];
   char err[256];
   nds_scene_cfg fc = *wc;

@@ -655,7 +655,7 @@ static void test_fit_recovers_sliding(void **state) {
 
 /* Levenberg-Marquardt after a cheap CEM (Q 16, C 1) from the same far start, on records
  * the 1 ms model replays exactly: it lands on the truth, its interval is finite, and it
- * moves the distribution's mean (not its std). A bad lm_iters is refused. */
+ * moves the distribution's mean (not its std). A bad lm_iters or lm_fd is refused. */
 static void test_fit_refine(void **state) {
   (void)state;
   char err[256];
@@ -668,6 +668,7 @@ static void test_fit_refine(void **state) {
   cfg.fit[ND_TH_ROLL] = 0;
   cfg.mu0[ND_TH_ROLL] = nd_theta_true[ND_TH_ROLL];
   cfg.lm_iters = 12;
+  cfg.lm_fd = 0.02; /* these records replay exactly: their residuals are smooth */
   nds_fit *f = nds_fit_create(&nm, &cfg, pool, err, sizeof(err));
   assert_non_null(f);
   nds_fit_out out;
@@ -704,6 +705,10 @@ static void test_fit_refine(void **state) {
   cfg.lm_iters = 99;
   assert_null(nds_fit_create(&nm, &cfg, pool, err, sizeof(err)));
   assert_non_null(strstr(err, "lm_iters"));
+  cfg.lm_iters = 4;
+  cfg.lm_fd = 0.0;
+  assert_null(nds_fit_create(&nm, &cfg, pool, err, sizeof(err)));
+  assert_non_null(strstr(err, "lm_fd"));
   nds_model_free(&nm);
   nd_pool_free(pool);
 }
