@@ -57,8 +57,8 @@ void nds_planner_cfg_default(nds_planner_cfg *cfg) {
   nds_ctrl_cfg_default(&cfg->ctrl);
   cfg->free_flight = 1;
   /* At the limit itself: the lab's box and Cartesian limits already keep to 0.87 of the
-   * joint velocity and 0.9 of the acceleration limits (from rest); a margin below that
-   * slowed the lab pushes (doc/decisions.md#arm-aware). */
+   * joint velocity and 0.9 of the acceleration limits from rest; a margin below that
+   * slowed the lab pushes (doc/decisions.md#arm-aware, #velocity-product). */
   cfg->reach_max = 1.0;
   cfg->seed = 1;
 }

@@ -21,7 +21,9 @@ int nds_reach_build(nds_reach *r, const nds_panda_cfg *cfg, const double lo[2],
   r->nx = (int)ceil((hi[0] - lo[0]) / step) + 1;
   r->ny = (int)ceil((hi[1] - lo[1]) / step) + 1;
   r->rate = malloc(sizeof(float) * 2 * NDS_PANDA_NJ * r->nx * r->ny);
-  if (!r->rate) {
+  r->slope = malloc(sizeof(float) * 4 * NDS_PANDA_NJ * r->nx * r->ny);
+  if (!r->rate || !r->slope) {
+    nds_reach_free(r);
     snprintf(err, errlen, "reach: out of memory for %d x %d cells", r->nx, r->ny);
     return -1;
   }
@@ -50,18 +52,42 @@ int nds_reach_build(nds_reach *r, const nds_panda_cfg *cfg, const double lo[2],
       }
     }
   }
+  /* The rates' slopes along x and y at each node: central differences, one-sided at an
+   * edge or beside an unreachable node, none (inf) without a neighbour either side. */
+  const int K = 2 * NDS_PANDA_NJ;
+  for (int iy = 0; iy < r->ny; iy++)
+    for (int ix = 0; ix < r->nx; ix++) {
+      const int c = iy * r->nx + ix;
+      float *sl = r->slope + (size_t)2 * K * c;
+      for (int axis = 0; axis < 2; axis++) {
+        const int n = axis ? r->ny : r->nx, at = axis ? iy : ix, stride = axis ? r->nx : 1;
+        const float *self = r->rate + (size_t)K * c;
+        const float *lo_n = at > 0 ? r->rate + (size_t)K * (c - stride) : NULL;
+        const float *hi_n = at < n - 1 ? r->rate + (size_t)K * (c + stride) : NULL;
+        if (lo_n && !isfinite(lo_n[0])) lo_n = NULL;
+        if (hi_n && !isfinite(hi_n[0])) hi_n = NULL;
+        for (int j = 0; j < K; j++) {
+          float g = INFINITY;
+          if (lo_n && hi_n) g = (float)((hi_n[j] - lo_n[j]) / (2 * step));
+          else if (hi_n) g = (float)((hi_n[j] - self[j]) / step);
+          else if (lo_n) g = (float)((self[j] - lo_n[j]) / step);
+          sl[2 * j + axis] = g;
+        }
+      }
+    }
   return 0;
 }
 
 void nds_reach_free(nds_reach *r) {
   free(r->rate);
+  free(r->slope);
   memset(r, 0, sizeof(*r));
 }
 
-double nds_reach_load(const nds_reach *r, const double p[2], const double v[2],
-                      const double a[2]) {
+int nds_reach_joint(const nds_reach *r, const double p[2], const double v[2],
+                    const double a[2], double qd[NDS_PANDA_NJ], double qdd[NDS_PANDA_NJ]) {
   const double fx = (p[0] - r->lo[0]) / r->step, fy = (p[1] - r->lo[1]) / r->step;
-  if (!(fx >= 0.0 && fy >= 0.0 && fx <= r->nx - 1 && fy <= r->ny - 1)) return INFINITY;
+  if (!(fx >= 0.0 && fy >= 0.0 && fx <= r->nx - 1 && fy <= r->ny - 1)) return -1;
   int ix = (int)fx, iy = (int)fy;
   if (ix > r->nx - 2) ix = r->nx - 2;
   if (iy > r->ny - 2) iy = r->ny - 2;
@@ -72,17 +98,37 @@ double nds_reach_load(const nds_reach *r, const double p[2], const double v[2],
   const int K = 2 * NDS_PANDA_NJ;
   const float *c00 = r->rate + (size_t)K * c, *c10 = r->rate + (size_t)K * (c + nx),
               *c01 = r->rate + (size_t)K * (c + ny), *c11 = r->rate + (size_t)K * (c + ny + nx);
-  /* Bilinear in the rates; an unreachable corner makes the whole cell unreachable. */
-  double load = 0.0;
+  const float *s00 = r->slope + (size_t)2 * K * c, *s10 = r->slope + (size_t)2 * K * (c + nx),
+              *s01 = r->slope + (size_t)2 * K * (c + ny),
+              *s11 = r->slope + (size_t)2 * K * (c + ny + nx);
+  /* Bilinear in the rates and in their slopes; an unreachable corner makes the whole cell
+   * unreachable. The rates change along the path, so moving at v adds (dm/dp v) v to m a:
+   * the joints' velocity-product terms. */
   for (int i = 0; i < NDS_PANDA_NJ; i++) {
-    double m[2];
+    double m[2], g[2][2];
     for (int k = 0; k < 2; k++) {
       const int j = 2 * i + k;
       m[k] = (1 - w) * ((1 - u) * c00[j] + u * c10[j]) + w * ((1 - u) * c01[j] + u * c11[j]);
+      for (int l = 0; l < 2; l++) {
+        const int e = 2 * j + l;
+        g[k][l] = (1 - w) * ((1 - u) * s00[e] + u * s10[e]) + w * ((1 - u) * s01[e] + u * s11[e]);
+      }
     }
-    if (!isfinite(m[0]) || !isfinite(m[1])) return INFINITY;
-    const double lv = fabs(m[0] * v[0] + m[1] * v[1]) / nds_panda_dq_max[i];
-    const double la = fabs(m[0] * a[0] + m[1] * a[1]) / nds_panda_ddq_max[i];
+    if (!isfinite(m[0]) || !isfinite(m[1]) || !nd_all_finite(&g[0][0], 4)) return -1;
+    qd[i] = m[0] * v[0] + m[1] * v[1];
+    qdd[i] = m[0] * a[0] + m[1] * a[1];
+    for (int k = 0; k < 2; k++) qdd[i] += (g[k][0] * v[0] + g[k][1] * v[1]) * v[k];
+  }
+  return 0;
+}
+
+double nds_reach_load(const nds_reach *r, const double p[2], const double v[2],
+                      const double a[2]) {
+  double qd[NDS_PANDA_NJ], qdd[NDS_PANDA_NJ];
+  if (nds_reach_joint(r, p, v, a, qd, qdd)) return INFINITY;
+  double load = 0.0;
+  for (int i = 0; i < NDS_PANDA_NJ; i++) {
+    const double lv = fabs(qd[i]) / nds_panda_dq_max[i], la = fabs(qdd[i]) / nds_panda_ddq_max[i];
     if (lv > load) load = lv;
     if (la > load) load = la;
   }

@@ -4,9 +4,10 @@
  * On a grid over a box, each cell holds the inverse kinematics' joints (tool down, seeded
  * from the neighbour solved before) and from them the joint rates per unit sphere rate
  * along x and y (nds_panda_rate_map), so a motion's load follows its direction: moving
- * radially folds the elbow several times faster than moving across. A cell whose IK
- * fails or comes within NDS_PANDA_IK_MARGIN of a joint limit is unreachable. Built once
- * (allocates); the queries allocate nothing. */
+ * radially folds the elbow several times faster than moving across; their slopes give the
+ * joints' velocity-product accelerations at speed (up to half a limit at 0.5 m/s in the lab
+ * box). A cell whose IK fails or comes within NDS_PANDA_IK_MARGIN of a joint limit is
+ * unreachable. Built once (allocates); the queries allocate nothing. */
 #ifndef NDS_REACH_H
 #define NDS_REACH_H
 
@@ -17,6 +18,7 @@ typedef struct {
   int nx, ny;
   float *rate;          /* per cell, row-major in y: NDS_PANDA_NJ x 2 joint rates per unit
                            sphere rate along x, y; inf: no IK */
+  float *slope;         /* per cell: each rate's slope along x and y, 1/m (rate-major) */
   int unreachable;      /* cells without an IK solution */
 } nds_reach;
 
@@ -26,11 +28,15 @@ int nds_reach_build(nds_reach *r, const nds_panda_cfg *cfg, const double lo[2],
                     const double hi[2], double step, char *err, int errlen);
 void nds_reach_free(nds_reach *r);
 
-/* The arm's load moving the sphere at p with velocity v and acceleration a (x, y): the
- * largest joint velocity or acceleration over its limit (1 = at a limit), from the
- * interpolated rates; infinite at an unreachable cell or outside the box. The
- * acceleration is from rest: at speed the joints' velocity-product terms add to it, so
- * keep a margin below 1. */
+/* The joints' rates qd and accelerations qdd moving the sphere at p with velocity v and
+ * acceleration a (x, y), from the interpolated rates and their slopes (the
+ * velocity-product terms included). Return 0, or -1 at an unreachable cell or outside the
+ * box. */
+int nds_reach_joint(const nds_reach *r, const double p[2], const double v[2],
+                    const double a[2], double qd[NDS_PANDA_NJ], double qdd[NDS_PANDA_NJ]);
+
+/* The arm's load moving the sphere so: the largest joint velocity or acceleration over its
+ * limit (1 = at a limit; nds_reach_joint); infinite where that fails. */
 double nds_reach_load(const nds_reach *r, const double p[2], const double v[2],
                       const double a[2]);
 
