@@ -51,9 +51,9 @@
  * budget; it stays an option (doc/decisions.md#robust-score). */
 #define NDS_FIT_ROBUST 0.0
 
-/* The refinement's difference step, in sigma0: a replay's contact events make its
- * residuals rough at finer steps (0.02 refused most LM steps), and a difference over them
- * is noise; 0.5 is ~6 % of sliding friction at D = 1 (doc/decisions.md#lm-step). */
+/* The refinement's difference step, in sigma0 (~6 % of sliding friction at D = 1): a
+ * replay's contact events make its residuals rough at finer steps, and a difference over
+ * them is noise that refuses the LM steps (doc/decisions.md#lm-step). */
 #define NDS_FIT_LM_FD 0.5
 
 /* Default prior width: the paper's smaller uncertainty, D = 0.2. */

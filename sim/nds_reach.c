@@ -58,10 +58,10 @@ int nds_reach_build(nds_reach *r, const nds_panda_cfg *cfg, const double lo[2],
   for (int iy = 0; iy < r->ny; iy++)
     for (int ix = 0; ix < r->nx; ix++) {
       const int c = iy * r->nx + ix;
+      const float *self = r->rate + (size_t)K * c;
       float *sl = r->slope + (size_t)2 * K * c;
       for (int axis = 0; axis < 2; axis++) {
         const int n = axis ? r->ny : r->nx, at = axis ? iy : ix, stride = axis ? r->nx : 1;
-        const float *self = r->rate + (size_t)K * c;
         const float *lo_n = at > 0 ? r->rate + (size_t)K * (c - stride) : NULL;
         const float *hi_n = at < n - 1 ? r->rate + (size_t)K * (c + stride) : NULL;
         if (lo_n && !isfinite(lo_n[0])) lo_n = NULL;

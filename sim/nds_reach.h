@@ -5,8 +5,8 @@
  * from the neighbour solved before) and from them the joint rates per unit sphere rate
  * along x and y (nds_panda_rate_map), so a motion's load follows its direction: moving
  * radially folds the elbow several times faster than moving across; their slopes give the
- * joints' velocity-product accelerations at speed (up to half a limit at 0.5 m/s in the lab
- * box). A cell whose IK fails or comes within NDS_PANDA_IK_MARGIN of a joint limit is
+ * joints' velocity-product accelerations at speed (up to 0.56 of a limit at 0.5 m/s in the
+ * lab box). A cell whose IK fails or comes within NDS_PANDA_IK_MARGIN of a joint limit is
  * unreachable. Built once (allocates); the queries allocate nothing. */
 #ifndef NDS_REACH_H
 #define NDS_REACH_H

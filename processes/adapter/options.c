@@ -65,13 +65,15 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
                "replay options above, print its loss L and L's terms summed over the rollouts "
                "as 'name value unit' lines and exit (a validation loss on held-out rollouts, "
                "as nudge-study uses it)"},
-      {"pop", ND_OPT_INT, &fc->pop, 2, 4096, .arg = "Q", .help = "CEM population Q (the paper's 32)"},
-      {"iters", ND_OPT_INT, &fc->iters, 1, NDS_FIT_MAX_ITERS, .arg = "C", .help = "CEM iterations C (the paper's 2)"},
+      {"pop", ND_OPT_INT, &fc->pop, 2, 4096, .arg = "Q",
+       .help = "CEM population Q (the paper's 32)"},
+      {"iters", ND_OPT_INT, &fc->iters, 1, NDS_FIT_MAX_ITERS, .arg = "C",
+       .help = "CEM iterations C (the paper's 2)"},
       {"lm-iters", ND_OPT_INT, &fc->lm_iters, 0, 50, .arg = "N",
        .help = "Levenberg-Marquardt iterations on the replays' residuals after CEM, from its "
-               "mean (0: off); e.g. --pop 4 --iters 1 --lm-iters 3 needs under half the "
-               "replays of the default (nudge-bench's refit_replays_lm); PARAMS' std stays "
-               "CEM's"},
+               "mean (0: off); --pop 4 --iters 1 --lm-iters 3 needs under half the replays "
+               "of the default on nudge-bench's records (refit_replays_lm) but fitted worse "
+               "live (doc/decisions.md#lm-step); PARAMS' std stays CEM's"},
       {"seed", ND_OPT_U64, &o->seed, .help = "CEM seed (a restart adds the history's version)"},
       {"lcm-url", ND_OPT_STRING, &o->url, .arg = "URL", .def = "$LCM_DEFAULT_URL, else " NDP_DEFAULT_URL,
        .help = "LCM URL"},
@@ -80,8 +82,8 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
                       "Incremental adaptation: watches the replay buffer FILE (appended to by "
                       "nudge-tasks --record); whenever it holds rollouts the last fit did not "
                       "use, refits theta with CEM on all of them (Q 32, C 2, elite fraction "
-                      "0.2, unless --pop, --iters), publishes PARAMS (mean, std, loss, buffer size, version) and "
-                      "appends the fit to the parameter history. PARAMS is republished at 1 Hz. "
+                      "0.2, unless --pop, --iters), publishes PARAMS (mean, std, loss, buffer "
+                      "size, version) and appends the fit to the parameter history. PARAMS is republished at 1 Hz. "
                       "A restarted adapter goes on from its history: version numbers and the "
                       "CEM distribution continue.",
                       "stdout: one line per refit (--score: its figures). Exit status: 0 after "

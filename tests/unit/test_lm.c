@@ -44,16 +44,19 @@ static void data(fit *f, nd_rng *r, double sd, double rho) {
   }
 }
 
-static nd_lm *make(int stride, int iters) {
+static nd_lm *make_n(int n, const double *lower, const double *upper, const double *sc,
+                     int stride, int iters) {
   nd_lm_cfg c;
   nd_lm_cfg_default(&c);
-  c.n = 3, c.m = M, c.lower = lo, c.upper = hi, c.scale = scale, c.stride = stride;
+  c.n = n, c.m = M, c.lower = lower, c.upper = upper, c.scale = sc, c.stride = stride;
   c.iters = iters;
   char err[128];
   nd_lm *lm = nd_lm_create(&c, err, sizeof err);
   if (!lm) fail_msg("%s", err);
   return lm;
 }
+
+static nd_lm *make(int stride, int iters) { return make_n(3, lo, hi, scale, stride, iters); }
 
 static void test_converges(void **state) {
   (void)state;
@@ -155,12 +158,8 @@ static void test_uninformed(void **state) {
   nd_rng_seed(&r, 7, 0);
   data(&f, &r, 0.02, 0.0);
   const double lo4[4] = {0, 0.01, -1, -1}, hi4[4] = {10, 10, 1, 1}, sc4[4] = {1, 1, 0.1, 1};
-  nd_lm_cfg c;
-  nd_lm_cfg_default(&c);
-  c.n = 4, c.m = M, c.lower = lo4, c.upper = hi4, c.scale = sc4, c.iters = 8;
+  nd_lm *lm4 = make_n(4, lo4, hi4, sc4, 0, 8), *lm3 = make(0, 8);
   char err[128];
-  nd_lm *lm4 = nd_lm_create(&c, err, sizeof err), *lm3 = make(0, 8);
-  assert_non_null(lm4);
   double x4[4] = {1.8, 1.3, 0.35, 0.5}, x3[3] = {1.8, 1.3, 0.35};
   nd_lm_out o4, o3;
   assert_int_equal(nd_lm_run(lm4, residuals4, &f, x4, &o4, err, sizeof err), 0);
