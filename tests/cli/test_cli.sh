@@ -384,7 +384,7 @@ args_are nudge-bridge --workspace "$WS" --world ideal "${EVIL[0]}" "${EVIL[1]}"
 args_are nudge-executor --workspace "$WS" "${EVIL[3]}" "${EVIL[4]}" "${EVIL[5]}"
 args_are nudge-planner --workspace "$WS" --theta "$THETA" --pop "${EVIL[2]}"
 args_are nudge-adapter --theta "$THETA" --buffer "$BUF" "${EVIL[6]}" "${EVIL[7]}"
-args_are nudge-tasks --record "$BUF" --world ideal --theta "$THETA" --goal "${EVIL[8]}" "${EVIL[9]}" "${EVIL[4]}"
+args_are nudge-tasks --record "$BUF" --world ideal --eps 1e-3 --theta "$THETA" --goal "${EVIL[8]}" "${EVIL[9]}" "${EVIL[4]}"
 pwned=$(find "$W" -name 'pwned[0-9]')
 pt_check "no argument was run as a command (no pwned* file)" test -z "$pwned"
 pt_check "the log directory has its literal name" test -f "$LOGDIR/supervisor.log"
