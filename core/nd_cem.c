@@ -257,6 +257,16 @@ void nd_cem_shift(nd_cem *cem, int steps, const double *std_init) {
   if (std_init) memcpy(cem->std, std_init, (size_t)cem->dim * sizeof(double));
 }
 
+void nd_cem_map(nd_cem *cem, nd_cem_map_fn fn, void *ctx) {
+  fn(ctx, cem->mean);
+  nd_cem_clip_vec(cem, cem->mean);
+  for (int k = 0; k < cem->nkept; k++) {
+    double *e = cem->keep + (size_t)k * cem->dim;
+    fn(ctx, e);
+    nd_cem_clip_vec(cem, e);
+  }
+}
+
 /* Population of fresh samples in iteration it: pop * gamma^-it, floored at twice the
  * elite count (but never above pop) so late iterations still have a choice. */
 static int nd_cem_pop_at(const nd_cem *cem, int it) {

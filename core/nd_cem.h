@@ -64,6 +64,11 @@ void nd_cem_set_dist(nd_cem *cem, const double *mean, const double *std);
  * (NULL keeps std). */
 void nd_cem_shift(nd_cem *cem, int steps, const double *std_init);
 
+/* Warm start in a new frame: fn(ctx, x) rewrites the mean and each kept elite x (dim
+ * values) in place; the results are clipped into the bounds. */
+typedef void (*nd_cem_map_fn)(void *ctx, double *x);
+void nd_cem_map(nd_cem *cem, nd_cem_map_fn fn, void *ctx);
+
 /* Run cfg.iters iterations from the current distribution with generator r (all sampling
  * happens on the calling thread, so results do not depend on how costs are spread).
  * One callback per iteration. Return 0, or the callback's non-zero code at once (the

@@ -13,6 +13,8 @@
  * equation of the integral of squared snap is p^(8) = 0. */
 #include "nd_snap.h"
 
+#include <string.h>
+
 void nd_snap_coeffs(const double s0[4], double p1, double v1, double T, double c[8]) {
   c[0] = s0[ND_P];
   c[1] = s0[ND_V];
@@ -98,4 +100,28 @@ void nd_snap_seg_eval(const nd_snap_seg *seg, double t, double out[2][4]) {
       out[ax][ND_J] = 0.0;
     }
   }
+}
+
+void nd_snap_retime(const double s0[2][4], const double *keys, int M, double T, double dt,
+                    double *out) {
+  nd_snap_seg seg[ND_MAX_KEYS];
+  double s[2][4], r[ND_MAX_KEYS][4];
+  memcpy(s, s0, sizeof(s));
+  for (int i = 0; i < M; i++) {
+    nd_snap_seg_make(&seg[i], (const double(*)[4])s, keys + 4 * i, keys + 4 * i + 2, T);
+    nd_snap_seg_eval(&seg[i], T, s);
+  }
+  for (int k = 0; k < M; k++) {
+    const double tau = dt + (k + 1) * T;
+    /* The last keypoint is the end state itself: take it as given, not re-evaluated. */
+    const int i = tau < M * T ? (int)(tau / T) : M;
+    if (i >= M) {
+      memcpy(r[k], keys + 4 * (M - 1), sizeof(r[k]));
+      continue;
+    }
+    nd_snap_seg_eval(&seg[i], tau - i * T, s);
+    r[k][0] = s[0][ND_P], r[k][1] = s[1][ND_P];
+    r[k][2] = s[0][ND_V], r[k][3] = s[1][ND_V];
+  }
+  memcpy(out, r, sizeof(double) * 4 * (size_t)M);
 }

@@ -19,6 +19,8 @@ struct nds_planner {
   nds_rollout_out *outs;
   double *lower, *upper, *std0;
   int warm;                  /* the cem holds the previous plan's distribution */
+  double last_sp0[2][4];     /* the last plan's start setpoint, for nds_planner_retime */
+  double retime_dt;          /* nds_planner_retime's shift, for the map callback */
   /* inputs of the plan in progress, read by the cost callback */
   const nds_state *s;
   const double (*sp0)[4];
@@ -229,6 +231,18 @@ const nds_planner_cfg *nds_planner_config(const nds_planner *p) { return &p->cfg
 
 void nds_planner_reset(nds_planner *p) { p->warm = 0; }
 
+/* The warm start's keypoints, from the last plan's start, moved retime_dt along their path. */
+static void retime_keys(void *ctx, double *x) {
+  const nds_planner *p = ctx;
+  nd_snap_retime((const double(*)[4])p->last_sp0, x, p->cfg.M, p->cfg.T, p->retime_dt, x);
+}
+
+void nds_planner_retime(nds_planner *p, double dt) {
+  if (!p->warm || !(dt > 0.0) || !isfinite(dt)) return;
+  p->retime_dt = dt;
+  nd_cem_map(p->cem, retime_keys, p);
+}
+
 int nds_planner_predict(nds_planner *p, const nds_state *s, const double (*sp)[2][4], int n,
                         nds_state *s1, char *err, int errlen) {
   return nds_predict(nds_batch_model(p->batch, 0), nds_batch_data(p->batch, 0), &p->cfg.ctrl,
@@ -258,11 +272,13 @@ int nds_planner_plan(nds_planner *p, const nds_state *s, const double sp0[2][4],
     nd_cem_set_dist(p->cem, mean, p->std0);
     p->warm = 1;
   } else {
-    /* Re-plans come every 50-100 ms while a segment lasts T = 300 ms: the keypoints of the
-     * previous plan are still ahead, so the mean is kept as it is (no shift) and only the
-     * std is widened again. */
+    /* Re-plans come every 25-100 ms while a segment lasts 0.3-0.6 s: the previous plan's
+     * keypoints are still ahead, so the mean keeps them (moved along their path by
+     * nds_planner_retime where the caller knows when plans start) and only the std is
+     * widened again. */
     nd_cem_shift(p->cem, 0, p->std0);
   }
+  memcpy(p->last_sp0, sp0, sizeof(p->last_sp0));
   p->s = s;
   p->sp0 = sp0;
   p->goal = goal;

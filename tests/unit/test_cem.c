@@ -518,6 +518,48 @@ static void test_shift(void **state) {
   nd_cem_free(cem);
 }
 
+/* nd_cem_map rewrites the mean and the kept elites and clips them into the bounds. */
+static void add_one(void *ctx, double *x) {
+  int *calls = ctx;
+  (*calls)++;
+  for (int i = 0; i < 4; i++) x[i] += 1.0;
+}
+
+static int zero_cost(void *ctx, const double *x, int n, double *cost) {
+  (void)ctx, (void)x;
+  for (int i = 0; i < n; i++) cost[i] = 0.0;
+  return 0;
+}
+
+static void test_map(void **state) {
+  (void)state;
+  nd_cem_cfg cfg;
+  nd_cem_cfg_default(&cfg, 2, 2, 8, 1);
+  cfg.keep_frac = 0.5;
+  const double lo[4] = {-10, -10, -10, -10}, hi[4] = {10, 10, 10, 1.5};
+  cfg.lower = lo, cfg.upper = hi;
+  nd_cem *cem = nd_cem_create(&cfg, NULL, 0);
+  assert_non_null(cem);
+  const double m[4] = {0, 1, 2, 3}, s[4] = {1e-3, 1e-3, 1e-3, 1e-3};
+  nd_cem_set_dist(cem, m, s);
+  int calls = 0;
+  nd_cem_map(cem, add_one, &calls);
+  assert_int_equal(calls, 1);  /* set_dist forgot the kept elites: the mean alone */
+  const double e1[4] = {1, 2, 3, 1.5};
+  assert_memory_equal(nd_cem_mean(cem), e1, sizeof e1);
+  nd_rng r;
+  nd_rng_seed(&r, 1, 1);
+  assert_int_equal(nd_cem_run(cem, &r, zero_cost, NULL), 0);
+  const double *mean = nd_cem_mean(cem);
+  double before[4];
+  memcpy(before, mean, sizeof before);
+  calls = 0;
+  nd_cem_map(cem, add_one, &calls);
+  assert_true(calls > 1);  /* the mean and every kept elite */
+  for (int i = 0; i < 4; i++) assert_near(nd_cem_mean(cem)[i], fmin(before[i] + 1.0, hi[i]), 1e-15);
+  nd_cem_free(cem);
+}
+
 /* ---- elite selection: ties, non-finite costs, agreement with a full sort ---- */
 
 #define SP 500
@@ -809,6 +851,7 @@ int main(void) {
       cmocka_unit_test(test_keep_never_worse),
       cmocka_unit_test(test_population_schedule),
       cmocka_unit_test(test_shift),
+      cmocka_unit_test(test_map),
       cmocka_unit_test(test_elite_selection),
       cmocka_unit_test(test_update_rule),
       cmocka_unit_test(test_step_std),

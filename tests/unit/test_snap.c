@@ -1,5 +1,7 @@
 /* test_snap: minimum-snap segments meet their eight conditions, are optimal against
  * perturbations that keep those conditions, and splice seamlessly mid-segment. */
+#include <string.h>
+
 #include "nd_test.h"
 
 #include "nd_rng.h"
@@ -306,6 +308,51 @@ static void test_eval_outside_segment(void **state) {
   }
 }
 
+/* A re-plan dt later, sampled along the chain, follows the same path: at dt = 0 it gives
+ * the keypoints back, at dt = T each keypoint takes the next one's place, in between the
+ * chain's own state, and past its end its last keypoint. */
+static void test_retime(void **state) {
+  (void)state;
+  nd_rng r;
+  nd_rng_seed(&r, 7, 1);
+  enum { M = 3 };
+  const double T = 0.3;
+  for (int trial = 0; trial < 50; trial++) {
+    double s0[2][4], keys[4 * M], out[4 * M];
+    for (int ax = 0; ax < 2; ax++) {
+      double p1, v1;
+      random_axis(&r, s0[ax], &p1, &v1);
+    }
+    for (int i = 0; i < 4 * M; i++) keys[i] = unif(&r, -1.0, 1.0);
+    nd_snap_retime((const double(*)[4])s0, keys, M, T, 0.0, out);
+    for (int i = 0; i < 4 * M; i++) assert_near(out[i], keys[i], 1e-9);
+    nd_snap_retime((const double(*)[4])s0, keys, M, T, T, out);
+    for (int i = 0; i < 4 * (M - 1); i++) assert_near(out[i], keys[i + 4], 1e-9);
+    for (int i = 0; i < 4; i++) assert_true(out[4 * (M - 1) + i] == keys[4 * (M - 1) + i]);
+
+    /* dt = 0.4 T: keypoint 0 is the chain at 1.4 T, inside segment 1. */
+    nd_snap_seg seg0, seg1;
+    double end0[2][4], at[2][4];
+    nd_snap_seg_make(&seg0, (const double(*)[4])s0, keys, keys + 2, T);
+    nd_snap_seg_eval(&seg0, T, end0);
+    nd_snap_seg_make(&seg1, (const double(*)[4])end0, keys + 4, keys + 6, T);
+    nd_snap_seg_eval(&seg1, 0.4 * T, at);
+    double in_place[4 * M];
+    memcpy(in_place, keys, sizeof(in_place));
+    nd_snap_retime((const double(*)[4])s0, in_place, M, T, 0.4 * T, in_place);
+    nd_snap_retime((const double(*)[4])s0, keys, M, T, 0.4 * T, out);
+    assert_memory_equal(in_place, out, sizeof(out));
+    for (int ax = 0; ax < 2; ax++) {
+      assert_near(out[ax], at[ax][ND_P], 1e-12);
+      assert_near(out[2 + ax], at[ax][ND_V], 1e-12);
+    }
+
+    nd_snap_retime((const double(*)[4])s0, keys, M, T, 2.5 * T, out);
+    for (int k = 0; k < M; k++)
+      for (int i = 0; i < 4; i++) assert_true(out[4 * k + i] == keys[4 * (M - 1) + i]);
+  }
+}
+
 int main(void) {
   gl_init();
   const struct CMUnitTest tests[] = {
@@ -315,6 +362,7 @@ int main(void) {
       cmocka_unit_test(test_perturbations_never_cheaper),
       cmocka_unit_test(test_splice_mid_segment),
       cmocka_unit_test(test_eval_outside_segment),
+      cmocka_unit_test(test_retime),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
