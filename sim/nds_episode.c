@@ -77,6 +77,8 @@ int nds_episode_run(const nds_model *world, mjData *d, nds_planner *planner,
       /* The world is paused here: the planner sees exactly the state it plans from, and
        * the executor switches at the same instant (the paper's protocol). */
       nd_exec_eval(&ex, t, sp);
+      /* The last plan started plan_period ago: go on along it (nds_planner_retime). */
+      if (out->plans > 0) nds_planner_retime(planner, cfg->plan_period);
       double w0 = wall_s();
       if (nds_planner_plan(planner, &s, (const double(*)[4])sp, goal, &plan, err, errlen))
         return -1;
