@@ -81,10 +81,11 @@ if pt_up_wait "$RUN" 30 "$up"; then
   done
   pt_spawn PT_LOGGER lcm-logger -q -f -c '^(ROBOT_STATE|STATUS|EPISODE|TASK)$' "$LOG2"
   pt_wait_for 5 test -e "$LOG2" || pt_fail "lcm-logger did not start"
-  # Two tasks: the first is the one the robot stops in, the second must run. The runner
-  # settles first (at least --settle), so wait for the planner to take up a new task.
+  # Two tasks: the first is the one the robot stops in (its eps cannot be met, so it is
+  # still running when the plans below arrive), the second must run. The runner settles
+  # first (at least --settle), so wait for the planner to take up a new task.
   n0=$(grep -c 'task [0-9]* started' "$RUN/planner.log")
-  pt_spawn tasks "$PT_BIN/nudge-tasks" --world lab --goal 0.0,0.20,0 --goal 0.0,0.05,0 \
+  pt_spawn tasks "$PT_BIN/nudge-tasks" --world lab --goal 0.0,0.20,0,1e-12 --goal 0.0,0.05,0 \
     --tau "$(pt_slow 8)" --settle 1 >"$PT_WORK/reflex-tasks.out" 2>"$PT_WORK/reflex-tasks.err"
   pt_wait_for 15 eval '(( $(grep -c "task [0-9]* started" "$RUN/planner.log") > n0 ))' ||
     pt_fail "the first task did not start"
