@@ -102,15 +102,20 @@ void nd_snap_seg_eval(const nd_snap_seg *seg, double t, double out[2][4]) {
   }
 }
 
-void nd_snap_retime(const double s0[2][4], const double *keys, int M, double T, double dt,
-                    double *out) {
-  nd_snap_seg seg[ND_MAX_KEYS];
-  double s[2][4], r[ND_MAX_KEYS][4];
+void nd_snap_chain(nd_snap_seg *seg, const double s0[2][4], const double *keys, int M, double T) {
+  double s[2][4];
   memcpy(s, s0, sizeof(s));
   for (int i = 0; i < M; i++) {
     nd_snap_seg_make(&seg[i], (const double(*)[4])s, keys + 4 * i, keys + 4 * i + 2, T);
     nd_snap_seg_eval(&seg[i], T, s);
   }
+}
+
+void nd_snap_retime(const double s0[2][4], const double *keys, int M, double T, double dt,
+                    double *out) {
+  nd_snap_seg seg[ND_MAX_KEYS];
+  double s[2][4], r[ND_MAX_KEYS][4];
+  nd_snap_chain(seg, s0, keys, M, T);
   for (int k = 0; k < M; k++) {
     const double tau = dt + (k + 1) * T;
     /* The last keypoint is the end state itself: take it as given, not re-evaluated. */

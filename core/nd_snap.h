@@ -37,6 +37,10 @@ void nd_snap_seg_make(nd_snap_seg *seg, const double s0[2][4], const double p1[2
  * velocity (p1 + v1 (t - T), v1, 0, 0); for t < 0 it evaluates at 0. */
 void nd_snap_seg_eval(const nd_snap_seg *seg, double t, double out[2][4]);
 
+/* M segments of T chained from s0 through keys[k] = (x, y, vx, vy) into seg[0..M): each
+ * starts where the one before ends, so the chain is C3-continuous. */
+void nd_snap_chain(nd_snap_seg *seg, const double s0[2][4], const double *keys, int M, double T);
+
 /* The chain of M segments of T from s0 through keys[k] = (x, y, vx, vy), sampled T apart
  * from dt >= 0 on: out[k] = (x, y, vx, vy) at dt + (k + 1) T, or keys[M - 1] past the
  * chain's end. out may be keys. A re-plan dt later goes on along the same path with it. */

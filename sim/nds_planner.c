@@ -20,7 +20,6 @@ struct nds_planner {
   double *lower, *upper, *std0;
   int warm;                  /* the cem holds the previous plan's distribution */
   double last_sp0[2][4];     /* the last plan's start setpoint, for nds_planner_retime */
-  double retime_dt;          /* nds_planner_retime's shift, for the map callback */
   /* inputs of the plan in progress, read by the cost callback */
   const nds_state *s;
   const double (*sp0)[4];
@@ -231,16 +230,22 @@ const nds_planner_cfg *nds_planner_config(const nds_planner *p) { return &p->cfg
 
 void nds_planner_reset(nds_planner *p) { p->warm = 0; }
 
-/* The warm start's keypoints, from the last plan's start, moved retime_dt along their path. */
+typedef struct {
+  const nds_planner *p;
+  double dt;
+} retime_ctx;
+
+/* The warm start's keypoints, from the last plan's start, moved dt along their path. */
 static void retime_keys(void *ctx, double *x) {
-  const nds_planner *p = ctx;
-  nd_snap_retime((const double(*)[4])p->last_sp0, x, p->cfg.M, p->cfg.T, p->retime_dt, x);
+  const retime_ctx *r = ctx;
+  const nds_planner *p = r->p;
+  nd_snap_retime((const double(*)[4])p->last_sp0, x, p->cfg.M, p->cfg.T, r->dt, x);
 }
 
 void nds_planner_retime(nds_planner *p, double dt) {
   if (!p->warm || !(dt > 0.0) || !isfinite(dt)) return;
-  p->retime_dt = dt;
-  nd_cem_map(p->cem, retime_keys, p);
+  retime_ctx r = {p, dt};
+  nd_cem_map(p->cem, retime_keys, &r);
 }
 
 int nds_planner_predict(nds_planner *p, const nds_state *s, const double (*sp)[2][4], int n,

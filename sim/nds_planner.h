@@ -73,7 +73,8 @@ const nds_planner_cfg *nds_planner_config(const nds_planner *p);
 
 /* The next plan starts dt s after the last one: its warm start becomes the keypoints T
  * apart from dt on along the paths the last plan's distribution described, so a re-plan
- * goes on along the plan the executor follows instead of putting its keypoints off again. */
+ * goes on along the plan the executor follows instead of putting its keypoints off again.
+ * Without a warm start (the first plan, after nds_planner_reset) it does nothing. */
 void nds_planner_retime(nds_planner *p, double dt);
 
 /* Forget the warm start (call at the start of a task). */

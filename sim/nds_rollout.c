@@ -93,15 +93,9 @@ void nds_rollout_ff(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
   }
   long nsteps = (long)steps;
 
-  /* Segment i starts from where segment i-1 ends, so the chain is C3-continuous. */
   nd_snap_seg seg[ND_MAX_KEYS];
   double s[2][4];
-  memcpy(s, sp0, sizeof(s));
-  for (int i = 0; i < M; i++) {
-    const double *k = keys + 4 * i;
-    nd_snap_seg_make(&seg[i], (const double(*)[4])s, k, k + 2, T);
-    nd_snap_seg_eval(&seg[i], T, s);
-  }
+  nd_snap_chain(seg, sp0, keys, M, T);
 
   for (int i = 0; i < mjNWARNING; i++) d->warning[i].number = WARN_START;
   nds_ctrl c;

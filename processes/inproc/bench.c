@@ -168,10 +168,7 @@ static int world_pushes(const nds_world_cfg *base, const double *keys, int n, in
     if (!w) return -1;
     nd_snap_seg seg[ND_MAX_KEYS];
     double sp[2][4] = {{c.ee[0], 0, 0, 0}, {c.ee[1], 0, 0, 0}};
-    for (int k = 0; k < M; k++) {
-      nd_snap_seg_make(&seg[k], (const double(*)[4])sp, keys + 8 * i + 4 * k, keys + 8 * i + 4 * k + 2, T);
-      nd_snap_seg_eval(&seg[k], T, sp);
-    }
+    nd_snap_chain(seg, (const double(*)[4])sp, keys + 8 * i, M, T);
     const double dt = nds_world_mj_model(w)->opt.timestep;
     const int horizon = (int)lround(M * T / dt), hold = (int)lround(0.2 / dt);
     nds_world_out out;

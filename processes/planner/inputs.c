@@ -77,7 +77,6 @@ static void use_task(void *user, const nudge_task_t *m) {
   p->task_mocap_lost0 = p->mocap_lost;
   p->task_overflows0 = p->overflows;
   nds_planner_reset(p->planner);
-  p->last_start_utime = 0;
   fprintf(stderr, PROG ": task %lld started: goal (%+.3f, %+.3f) m, yaw %+.1f deg, eps %g, "
           "limit %.1f s\n", (long long)m->task_id, m->goal_x, m->goal_y,
           m->goal_yaw * 180.0 / ND_PI, m->eps, m->time_limit);

@@ -66,10 +66,10 @@ int planner_plan_once(planner_proc *p, double now, char *err, int errlen) {
     p->lead_sum += n * dt;
   }
 
-  /* The warm start goes on along the last plan to where this one starts. */
+  /* The warm start goes on along the last plan to where this one starts (a task's first
+   * plan has none to move). */
   const int64_t t_start = start_utime ? start_utime : ndp_utime();
-  if (p->last_start_utime > 0)
-    nds_planner_retime(p->planner, 1e-6 * (double)(t_start - p->last_start_utime));
+  nds_planner_retime(p->planner, 1e-6 * (double)(t_start - p->last_start_utime));
   p->last_start_utime = t_start;
 
   nds_plan plan;

@@ -79,7 +79,7 @@ typedef struct {
   double lead_sum;             /* s of prediction over the task's plans */
   int64_t theta_version;       /* params_t.version in use; -1 = --theta */
   int64_t plan_id;
-  int64_t last_start_utime;    /* when the last plan of the task started; 0: none yet */
+  int64_t last_start_utime;    /* when the last plan started (nds_planner_retime) */
   ndp_ratelog rejected;        /* rate-limited log of refused inputs */
 } planner_proc;
 
