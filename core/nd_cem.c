@@ -42,6 +42,9 @@ struct nd_cem {
   double best_cost;
   double *iter_best;  /* iters */
   int evals;
+  int redrawn;        /* refused draws in the last run */
+  nd_cem_accept_fn accept;
+  void *accept_ctx;
 };
 
 static void nd_cem_err(char *err, int errlen, const char *fmt, const char *what) {
@@ -77,6 +80,7 @@ static int nd_cem_validate(const nd_cem_cfg *cfg, char *err, int errlen) {
   else if (!(cfg->keep_frac >= 0.0 && cfg->keep_frac <= 1.0)) bad = "keep_frac must be in [0, 1]";
   else if (!(cfg->pop_decay >= 1.0 && isfinite(cfg->pop_decay))) bad = "pop_decay must be finite and >= 1";
   else if (!(cfg->momentum >= 0.0 && cfg->momentum < 1.0)) bad = "momentum must be in [0, 1)";
+  else if (cfg->redraws < 0) bad = "redraws must be >= 0";
   else if (!(cfg->noise_beta >= 0.0 && isfinite(cfg->noise_beta))) bad = "noise_beta must be finite and >= 0";
   else if (!(cfg->std_min >= 0.0 && isfinite(cfg->std_min))) bad = "std_min must be finite and >= 0";
   else if (!(cfg->step_std >= 0.0 && isfinite(cfg->step_std))) bad = "step_std must be finite and >= 0";
@@ -361,6 +365,7 @@ int nd_cem_run(nd_cem *cem, nd_rng *r, nd_cem_cost_fn fn, void *ctx) {
   const nd_cem_cfg *cfg = &cem->cfg;
   size_t D = (size_t)cem->dim;
   cem->evals = 0;
+  cem->redrawn = 0;
   cem->best_cost = INFINITY;
   for (int i = 0; i < cfg->iters; i++) cem->iter_best[i] = INFINITY;
 
@@ -371,7 +376,14 @@ int nd_cem_run(nd_cem *cem, nd_rng *r, nd_cem_cost_fn fn, void *ctx) {
     int n = nk + nfresh + inject;
 
     if (nk > 0) memcpy(cem->x, cem->keep, (size_t)nk * D * sizeof(double));
-    for (int i = 0; i < nfresh; i++) nd_cem_sample(cem, r, cem->x + (size_t)(nk + i) * D);
+    for (int i = 0; i < nfresh; i++) {
+      double *x = cem->x + (size_t)(nk + i) * D;
+      nd_cem_sample(cem, r, x);
+      for (int k = 0; k < cfg->redraws && cem->accept && !cem->accept(cem->accept_ctx, x); k++) {
+        nd_cem_sample(cem, r, x);
+        cem->redrawn++;
+      }
+    }
     if (inject) memcpy(cem->x + (size_t)(n - 1) * D, cem->mean, D * sizeof(double));
 
     int first = 0;
@@ -429,6 +441,15 @@ double nd_cem_best_cost(const nd_cem *cem) {
 double nd_cem_iter_best(const nd_cem *cem, int i) {
   if (i < 0 || i >= cem->cfg.iters) return INFINITY;
   return cem->iter_best[i];
+}
+
+void nd_cem_set_accept(nd_cem *cem, nd_cem_accept_fn fn, void *ctx) {
+  cem->accept = fn;
+  cem->accept_ctx = ctx;
+}
+
+int nd_cem_redrawn(const nd_cem *cem) {
+  return cem->redrawn;
 }
 
 int nd_cem_evals(const nd_cem *cem) {

@@ -44,6 +44,9 @@ typedef struct {
                           own); samples, mean and shifted elites are clipped */
   const double *upper;
   int inject_mean;    /* evaluate the mean as a candidate in the last iteration */
+  int redraws;        /* >= 0: a fresh sample the accept callback refuses is drawn again up
+                         to redraws times, the last draw kept (sampling truncated to what is
+                         accepted; doc/decisions.md#redraw); 0: every draw kept */
 } nd_cem_cfg;
 
 /* Fill cfg with plain-CEM defaults for the given shape (white noise, no keep, no decay). */
@@ -68,6 +71,13 @@ void nd_cem_shift(nd_cem *cem, int steps, const double *std_init);
  * values) in place; the results are clipped into the bounds. */
 typedef void (*nd_cem_map_fn)(void *ctx, double *x);
 void nd_cem_map(nd_cem *cem, nd_cem_map_fn fn, void *ctx);
+
+/* Whether candidate x (dim values) is worth evaluating; cheap, called on the sampling
+ * thread. Only consulted when cfg.redraws > 0. */
+typedef int (*nd_cem_accept_fn)(void *ctx, const double *x);
+void nd_cem_set_accept(nd_cem *cem, nd_cem_accept_fn fn, void *ctx);
+/* Fresh samples drawn again in the last run (refused draws, kept last draws excluded). */
+int nd_cem_redrawn(const nd_cem *cem);
 
 /* Run cfg.iters iterations from the current distribution with generator r (all sampling
  * happens on the calling thread, so results do not depend on how costs are spread).

@@ -107,22 +107,41 @@ void nds_planner_cfg_fit_limits(nds_planner_cfg *cfg) {
   cfg->std_init[3] = fmin(cfg->std_init[3], 0.25 * cfg->v_max);
 }
 
+/* A candidate's relative excess over the limits, 0 within them; *cart and *arm say which
+ * were broken. */
+static double limit_excess(const nds_planner *p, const double *keys, int *cart, int *arm) {
+  const nds_planner_cfg *c = &p->cfg;
+  double pk[3];
+  setpoint_peaks(p, keys, pk);
+  double ex = fmax(0.0, pk[0] / c->v_max - 1.0) + fmax(0.0, pk[1] / c->a_max - 1.0);
+  *cart = ex > 0.0;
+  *arm = 0;
+  if (c->reach) {
+    /* The arm's joints count as its Cartesian limits; no IK counts as twice the limit. */
+    const double ea = fmin(2.0, fmax(0.0, pk[2] / c->reach_max - 1.0));
+    *arm = ea > 0.0;
+    ex += ea;
+  }
+  return ex;
+}
+
+/* Sampling keeps to what the robot can do (nd_cem's redraws): a draw beyond the limits is
+ * drawn again. */
+static int plan_accept(void *ctx, const double *x) {
+  int cart, arm;
+  return limit_excess(ctx, x, &cart, &arm) <= 0.0;
+}
+
 static int plan_cost(void *ctx, const double *x, int n, double *cost) {
   nds_planner *p = ctx;
   const nds_planner_cfg *c = &p->cfg;
   if (n > p->cap) return -1;
   int m = 0;
   for (int i = 0; i < n; i++) {
-    double pk[3];
-    setpoint_peaks(p, x + i * p->dim, pk);
-    double ex = fmax(0.0, pk[0] / c->v_max - 1.0) + fmax(0.0, pk[1] / c->a_max - 1.0);
-    p->over_limits += ex > 0.0;
-    if (c->reach) {
-      /* The arm's joints count as its Cartesian limits; no IK counts as twice the limit. */
-      const double ea = fmin(2.0, fmax(0.0, pk[2] / c->reach_max - 1.0));
-      p->over_arm += ea > 0.0;
-      ex += ea;
-    }
+    int cart, arm;
+    const double ex = limit_excess(p, x + i * p->dim, &cart, &arm);
+    p->over_limits += cart;
+    p->over_arm += arm;
     if (!(ex <= 0.0)) {
       cost[i] = c->limit_penalty * (1.0 + (isfinite(ex) ? ex : 1e3));
       continue;
@@ -187,11 +206,13 @@ nds_planner *nds_planner_create(const nds_model *model, const nds_planner_cfg *c
   cc.lower = p->lower;
   cc.upper = p->upper;
   cc.inject_mean = 1;
+  cc.redraws = cfg->redraws;
   p->cem = nd_cem_create(&cc, err, errlen);
   if (!p->cem) {
     nds_planner_free(p);
     return NULL;
   }
+  nd_cem_set_accept(p->cem, plan_accept, p);
   p->cap = nd_cem_max_batch(p->cem);
   if (!(p->outs = calloc(p->cap, sizeof(*p->outs))) ||
       !(p->feas = calloc((size_t)p->cap * p->dim, sizeof(double))) ||
@@ -302,6 +323,7 @@ int nds_planner_plan(nds_planner *p, const nds_state *s, const double sp0[2][4],
   out->rollouts = p->rollouts;
   out->over_limits = p->over_limits;
   out->over_arm = p->over_arm;
+  out->redrawn = nd_cem_redrawn(p->cem);
   /* What the best plan predicts, for logging, drawing and the plan message; a diverged
    * rollout predicts the object stays where it is. */
   nds_rollout_out o;

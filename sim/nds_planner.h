@@ -32,6 +32,8 @@ typedef struct {
                              * default): candidates loading a joint beyond reach_max are
                              * penalised as limit breakers */
   double reach_max;         /* load allowed (nds_reach_load), 1 by default */
+  int redraws;              /* a fresh candidate beyond the limits is drawn again up to this
+                             * many times (nd_cem_cfg.redraws); 0 by default */
   uint64_t seed;
 } nds_planner_cfg;
 
@@ -49,6 +51,7 @@ typedef struct {
   int evals;                /* candidates scored */
   int rollouts;             /* of them simulated: those within the limits */
   int over_limits, over_arm; /* of them: beyond the Cartesian limits, beyond the arm's */
+  int redrawn;              /* fresh candidates drawn again for being beyond the limits */
 } nds_plan;
 
 typedef struct nds_planner nds_planner;

@@ -315,7 +315,7 @@ int main(int argc, char **argv) {
   /* 2. Batched rollouts on 1 and 2 workers, against the raw rate. 3. Plan latency at the
    * paper's settings on every core, warm-started like the MPC, with and without free flight;
    * against brute force: N C rollouts of H / dt steps at the raw rate on every worker. */
-  double rate[3] = {0}, eff2 = 0, med[3] = {0}, p90[3] = {0}, brute_ms = 0;
+  double rate[3] = {0}, eff2 = 0, med[4] = {0}, p90[4] = {0}, brute_ms = 0;
   double *lat = malloc(sizeof(double) * reps);
   nd_pool *pool = su.pool;
   if (sections & SEC_PLAN) {
@@ -340,14 +340,16 @@ int main(int argc, char **argv) {
     printf("parallel efficiency on 2 workers: %.2f of 2 x raw mj_step, %.2f of 2 x 1-worker batch\n",
            eff2, rate[2] / (2.0 * rate[1]));
 
-    /* N 128 C 4; N 50 C 2 without and with free flight. */
-    const int settings[3][3] = {{128, 4, 1}, {50, 2, 0}, {50, 2, 1}};
-    for (int k = 0; k < 3; k++) {
+    /* N 128 C 4; N 50 C 2 without and with free flight; the live planner's N 20 C 2 with
+     * draws beyond the limits drawn again (pop, iters, free flight, redraws). */
+    const int settings[4][4] = {{128, 4, 1, 0}, {50, 2, 0, 0}, {50, 2, 1, 0}, {20, 2, 1, 8}};
+    for (int k = 0; k < 4; k++) {
       nds_planner_cfg cfg;
       nds_planner_cfg_default(&cfg);
       cfg.pop = settings[k][0];
       cfg.iters = settings[k][1];
       cfg.free_flight = settings[k][2];
+      cfg.redraws = settings[k][3];
       nds_planner *p = nds_planner_create(&nm, &cfg, pool, err, sizeof(err));
       if (!p) {
         fprintf(stderr, "nudge-bench: %s\n", err);
@@ -362,10 +364,10 @@ int main(int argc, char **argv) {
       }
       med[k] = nd_quantile(lat, reps, 0.5);
       p90[k] = nd_quantile(lat, reps, 0.9);
-      printf("plan N %3d C %d, H 0.6 s, M 2, %d workers, free flight %s: median %.1f ms, p90 "
-             "%.1f ms (%d candidates, %d simulated: the others beyond the limits)\n", cfg.pop,
-             cfg.iters, nd_pool_size(pool), cfg.free_flight ? "on" : "off", med[k], p90[k],
-             plan.evals, plan.rollouts);
+      printf("plan N %3d C %d, H 0.6 s, M 2, %d workers, free flight %s, redraws %d: median "
+             "%.1f ms, p90 %.1f ms (%d candidates, %d simulated: the others beyond the "
+             "limits)\n", cfg.pop, cfg.iters, nd_pool_size(pool), cfg.free_flight ? "on" : "off",
+             cfg.redraws, med[k], p90[k], plan.evals, plan.rollouts);
       nds_planner_free(p);
     }
     brute_ms = 1e3 * 50.0 * 2.0 * nsteps / (raw_rate * nd_pool_size(pool));
@@ -597,6 +599,7 @@ int main(int argc, char **argv) {
     printf("plan_ms_p90_n50_c2 %.1f ms\n", p90[2]);
     printf("plan_ff_speedup_n50_c2 %.2f ratio\n", med[1] / med[2]);
     printf("plan_brute_ratio_n50_c2 %.3f ratio\n", med[2] / brute_ms);
+    printf("plan_ms_median_n20_c2_redraws %.1f ms\n", med[3]);
   }
   printf("plan_dt %.4f s\n", plan_dt);
   if (sections & SEC_PREDICT) {

@@ -50,11 +50,13 @@ void planner_task_summary(planner_proc *p, const char *how) {
   fprintf(stderr,
           PROG ": task %lld %s after %.2f s: %lld plans, %.1f plans/s over %.2f s of fresh "
           "state, plan %.1f ms mean / %.1f max, candidates beyond the limits %.1f %% / the "
-          "arm's %.1f %%, %lld mocap frames lost, %lld queue overflows\n",
+          "arm's %.1f %%, %.1f simulated per plan, %.1f redrawn, %lld mocap frames lost, %lld queue overflows\n",
           (long long)p->task.task_id, how, dt, (long long)p->task_plans,
           live > 0 ? p->task_plans / live : 0.0, live, p->task_plans ? p->task_ms_sum / p->task_plans : 0.0,
           p->task_ms_max, p->task_evals ? 100.0 * p->task_over_limits / p->task_evals : 0.0,
           p->task_evals ? 100.0 * p->task_over_arm / p->task_evals : 0.0,
+          p->task_plans ? (double)p->task_rollouts / p->task_plans : 0.0,
+          p->task_plans ? (double)p->task_redrawn / p->task_plans : 0.0,
           (long long)(p->mocap_lost - p->task_mocap_lost0),
           (long long)(p->overflows - p->task_overflows0));
 }
@@ -74,6 +76,7 @@ static void use_task(void *user, const nudge_task_t *m) {
   p->task_plans = 0;
   p->task_ms_sum = p->task_ms_max = p->task_stale = 0.0;
   p->task_evals = p->task_over_limits = p->task_over_arm = 0;
+  p->task_rollouts = p->task_redrawn = 0;
   p->task_mocap_lost0 = p->mocap_lost;
   p->task_overflows0 = p->overflows;
   nds_planner_reset(p->planner);

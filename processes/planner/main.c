@@ -12,7 +12,7 @@
 #include "planner.h"
 
 int main(int argc, char **argv) {
-  planner_opts o = {.threads = ndp_default_threads(), .pop = 50, .iters = 2, .seed = 1,
+  planner_opts o = {.threads = ndp_default_threads(), .pop = 20, .iters = 2, .seed = 1,
                     .max_rate = 40.0, .state_timeout = 0.1, .lead = 1};
   static const char *const lead_words[] = {"off", "on", NULL};
   static const char *const arm_words[] = {"none", "panda", NULL};
@@ -24,6 +24,9 @@ int main(int argc, char **argv) {
   memcpy(o.theta, nd_theta_true, sizeof(o.theta));
   nds_planner_cfg pc;
   nds_planner_cfg_default(&pc);
+  /* N 20 with draws beyond the limits drawn again simulates about as many candidates as the
+   * paper's N 50 without, all of them executable (doc/decisions.md#redraw). */
+  pc.redraws = 8;
   for (int k = 0; k < 2; k++) o.ws.lo[k] = pc.ws_lo[k], o.ws.hi[k] = pc.ws_hi[k];
   nd_opt opts[] = {
       {"lcm-url", ND_OPT_STRING, &o.url, .arg = "URL", .def = "$LCM_DEFAULT_URL, else " NDP_DEFAULT_URL,
@@ -32,7 +35,8 @@ int main(int argc, char **argv) {
        .def = "one per core",
        .help = "rollout workers, below the 1 kHz processes' real-time threads and (nice +5) "
                "below this process's LCM receive thread"},
-      {"pop", ND_OPT_INT, &o.pop, 4, 100000, .help = "iCEM population N (the paper's robot setting)"},
+      {"pop", ND_OPT_INT, &o.pop, 4, 100000,
+       .help = "iCEM population N (the paper's robot setting is 50, drawn without --redraws)"},
       {"iters", ND_OPT_INT, &o.iters, 1, 100, .help = "iCEM iterations C (the paper's robot setting)"},
       {"plan-dt", ND_OPT_DOUBLE, &o.plan_dt, 1e-4, 0.01, .arg = "S",
        .help = "planning model timestep (the tracking controller is stable up to 10 ms); at "
@@ -65,6 +69,10 @@ int main(int argc, char **argv) {
                "Cartesian limits do (the lab world's arm; nudge-up --world lab sets it)"},
       {"arm-load", ND_OPT_DOUBLE, &pc.reach_max, 0.1, 1.0, .arg = "R",
        .help = "with --arm: the share of a joint limit a plan may use"},
+      {"redraws", ND_OPT_INT, &pc.redraws, 0, 100,
+       .help = "draw a candidate beyond the limits (Cartesian or the arm's) again up to this "
+               "many times before it is scored: sampling truncated to what the robot can do, "
+               "so more of N is simulated where the limits are low"},
       {"segment-time", ND_OPT_DOUBLE, &pc.T, 0.05, 2.0, .arg = "S",
        .help = "duration of each keypoint's minimum-snap segment (the horizon is M times it); "
                "slower arms need longer ones to move as far"},
@@ -129,11 +137,11 @@ int main(int argc, char **argv) {
 
   fprintf(stderr,
           PROG ": %s, iCEM N %d C %d, M %d, T %.2f s, plan dt %.4f s (%s contact), %d worker(s), max %.1f "
-          "plans/s, lead %s, arm %s (load <= %g), state timeout %.3f s, theta (%g, %g, %g, %g), seed %llu, keypoints in "
+          "plans/s, lead %s, arm %s (load <= %g), redraws %d, state timeout %.3f s, theta (%g, %g, %g, %g), seed %llu, keypoints in "
           "x [%g, %g] y [%g, %g] m, v_max %g m/s, a_max %g m/s^2\n",
           ndp_url(o.url), o.pop, o.iters, pc.M, pc.T, o.plan_dt,
           calibrated ? "calibrated" : "the world's", o.threads, o.max_rate,
-          lead_words[o.lead], arm_words[arm], pc.reach_max, o.state_timeout, o.theta[0], o.theta[1], o.theta[2], o.theta[3],
+          lead_words[o.lead], arm_words[arm], pc.reach_max, pc.redraws, o.state_timeout, o.theta[0], o.theta[1], o.theta[2], o.theta[3],
           (unsigned long long)o.seed, pc.ws_lo[0], pc.ws_hi[0], pc.ws_lo[1], pc.ws_hi[1],
           pc.v_max, pc.a_max);
 

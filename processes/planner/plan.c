@@ -113,6 +113,8 @@ int planner_plan_once(planner_proc *p, double now, char *err, int errlen) {
   p->task_evals += plan.evals;
   p->task_over_limits += plan.over_limits;
   p->task_over_arm += plan.over_arm;
+  p->task_rollouts += plan.rollouts;
+  p->task_redrawn += plan.redrawn;
   if (ms > p->task_ms_max) p->task_ms_max = ms;
   return 0;
 }

@@ -72,6 +72,7 @@ typedef struct {
   int64_t task_plans, task_mocap_lost0, task_overflows0;
   double task_ms_sum, task_ms_max;
   int64_t task_evals, task_over_limits, task_over_arm; /* candidates, and those penalised */
+  int64_t task_rollouts, task_redrawn; /* candidates simulated, and fresh draws drawn again */
   double task_stale;           /* s of the task spent without fresh state */
 
   double plan_s;               /* recent plan time, s (moving average) */

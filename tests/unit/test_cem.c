@@ -800,6 +800,64 @@ static void expect_invalid(const nd_cem_cfg *cfg, const char *word) {
   if (!strstr(err, word)) fail_msg("message '%s' does not mention '%s'", err, word);
 }
 
+/* ---- redraws ---- */
+
+typedef struct {
+  int calls, seen, accepted;
+} redraw_ctx;
+
+static int redraw_accept(void *ctx, const double *x) {
+  ((redraw_ctx *)ctx)->calls++;
+  return x[0] >= 0.7;
+}
+
+static int redraw_cost(void *ctx, const double *x, int n, double *cost) {
+  redraw_ctx *c = ctx;
+  for (int k = 0; k < n; k++) {
+    c->seen++;
+    c->accepted += x[k * D8] >= 0.7;
+    cost[k] = bowl(x + k * D8);
+  }
+  return 0;
+}
+
+/* Sampling truncated to what accept allows: from mean 0, std 1 a draw passes x0 >= 0.7 with
+ * p ~ 0.24, so without redraws about a quarter of the evaluated candidates pass, with 20
+ * nearly all (a candidate fails only if 21 draws in a row do, p ~ 0.003); the redrawn
+ * count is the refused draws; without redraws accept is never asked. */
+static void test_redraw(void **state) {
+  (void)state;
+  double m0[D8], s0[D8];
+  fill(m0, D8, 0.0);
+  fill(s0, D8, 1.0);
+  int accepted[2], seen[2], redrawn[2], calls[2];
+  for (int v = 0; v < 2; v++) {
+    nd_cem_cfg cfg;
+    nd_cem_cfg_default(&cfg, 1, D8, 400, 1);
+    cfg.redraws = v ? 20 : 0;
+    nd_cem *cem = nd_cem_create(&cfg, NULL, 0);
+    assert_non_null(cem);
+    redraw_ctx c = {0, 0, 0};
+    nd_cem_set_accept(cem, redraw_accept, &c);
+    nd_cem_set_dist(cem, m0, s0);
+    nd_rng r;
+    nd_rng_seed(&r, 11, 0);
+    assert_int_equal(nd_cem_run(cem, &r, redraw_cost, &c), 0);
+    accepted[v] = c.accepted, seen[v] = c.seen, redrawn[v] = nd_cem_redrawn(cem), calls[v] = c.calls;
+    nd_cem_free(cem);
+  }
+  assert_int_equal(seen[0], 400);
+  assert_int_equal(seen[1], 400);
+  assert_in_range(accepted[0], 60, 135);
+  assert_true(accepted[1] >= 395);
+  assert_int_equal(redrawn[0], 0);
+  assert_int_equal(calls[0], 0);
+  /* every refused draw is drawn again; the draw that passes is asked too, the last of 20
+   * refusals' successor is not */
+  assert_in_range(calls[1] - redrawn[1], 395, 400);
+  assert_true(redrawn[1] > 2 * 300);  /* ~3 refusals per accepted candidate */
+}
+
 static void test_invalid_cfg(void **state) {
   (void)state;
   nd_cem_cfg ok, cfg;
@@ -827,6 +885,7 @@ static void test_invalid_cfg(void **state) {
   BAD(momentum, 1.0, "momentum");
   BAD(noise_beta, -1.0, "noise_beta");
   BAD(std_min, NAN, "std_min");
+  BAD(redraws, -1, "redraws");
 #undef BAD
   double lo[6] = {0, 0, 0, 0, 0, 0}, hi[6] = {1, 1, 1, -1, 1, 1};
   cfg = ok;
@@ -856,6 +915,7 @@ int main(void) {
       cmocka_unit_test(test_update_rule),
       cmocka_unit_test(test_step_std),
       cmocka_unit_test(test_step_gate),
+      cmocka_unit_test(test_redraw),
       cmocka_unit_test(test_callback_error),
       cmocka_unit_test(test_invalid_cfg),
   };

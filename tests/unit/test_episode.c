@@ -76,10 +76,47 @@ static void test_deterministic(void **state) {
   assert_int_equal(o[0].plans, o[1].plans);
 }
 
+/* At the lab's limits (0.45 m/s, 1.8 m/s^2, 0.6 s segments) most draws from a cold start
+ * break them. Redrawing those makes more of the population worth simulating: more
+ * rollouts and a smaller share of penalised candidates per plan, and no redraw at all
+ * when redraws is 0. Either way the best plan keeps to the limits. */
+static void test_redraws(void **state) {
+  fixture *f = *state;
+  const nd_goal g = {.x = 0.10, .y = 0.10, .yaw = 0.5};
+  const double ee0[2] = {-0.10, 0.0};
+  nds_state s;
+  nds_state_rest(&f->world, 0.0, 0.0, 0.0, ee0, &s);
+  double sp0[2][4] = {{ee0[0], 0, 0, 0}, {ee0[1], 0, 0, 0}};
+  nds_plan out[2];
+  char err[256];
+  for (int v = 0; v < 2; v++) {
+    nds_planner_cfg cfg = *nds_planner_config(f->planner);
+    cfg.v_max = 0.45;
+    cfg.a_max = 1.8;
+    cfg.T = 0.6;
+    cfg.pop = 20;
+    cfg.iters = 2;
+    cfg.redraws = v ? 8 : 0;
+    nds_planner_cfg_fit_limits(&cfg);
+    nds_planner *p = nds_planner_create(&f->plan, &cfg, f->pool, err, sizeof(err));
+    assert_non_null(p);
+    assert_int_equal(nds_planner_plan(p, &s, (const double(*)[4])sp0, &g, &out[v], err, sizeof(err)), 0);
+    nds_planner_free(p);
+    printf("redraws %d: %d evaluated, %d simulated, %d beyond the limits, %d redrawn, cost %g\n",
+           v ? 8 : 0, out[v].evals, out[v].rollouts, out[v].over_limits, out[v].redrawn, out[v].cost);
+    assert_true(out[v].cost < cfg.limit_penalty);
+  }
+  assert_int_equal(out[0].redrawn, 0);
+  assert_true(out[1].redrawn > out[1].evals);
+  assert_true(out[1].rollouts > out[0].rollouts + out[0].evals / 4);
+  assert_true(out[1].over_limits * out[0].evals < out[0].over_limits * out[1].evals);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_reaches_goals),
       cmocka_unit_test(test_deterministic),
+      cmocka_unit_test(test_redraws),
   };
   return cmocka_run_group_tests(tests, setup, teardown);
 }
