@@ -23,12 +23,15 @@ static const char *fmt_eps(double eps, char *buf, int len) {
 
 int main(int argc, char **argv) {
   uint64_t seed = 1;
-  int pop = 128, iters = 4, ngoals = NDS_DEMO_GOALS, threads = nds_setup_cores(64);
+  int pop = 128, iters = 4, redraws = 0, ngoals = NDS_DEMO_GOALS, threads = nds_setup_cores(64);
   double plan_dt = 0.005, tau = 5.0;
   nd_opt opts[] = {
       {"seed", ND_OPT_U64, &seed, .help = "planner seed"},
       {"pop", ND_OPT_INT, &pop, 4, 100000, .help = "iCEM population (the paper's simulation setting)"},
       {"iters", ND_OPT_INT, &iters, 1, 100, .help = "iCEM iterations"},
+      {"redraws", ND_OPT_INT, &redraws, 0, 100,
+       .help = "draw a candidate beyond the limits again up to this many times (nudge-planner's "
+               "--redraws; the live planner's setting is --pop 20 --iters 2 --redraws 8)"},
       {"threads", ND_OPT_INT, &threads, 1, 64, .help = "rollout workers", .def = "online cores"},
       {"plan-dt", ND_OPT_DOUBLE, &plan_dt, 1e-4, 0.02, .arg = "S",
        .help = "planning model timestep, s (the world steps at 0.001)"},
@@ -55,14 +58,15 @@ int main(int argc, char **argv) {
   nds_planner_cfg_default(&cfg);
   cfg.pop = pop;
   cfg.iters = iters;
+  cfg.redraws = redraws;
   cfg.seed = seed;
   if (!(planner = nds_planner_create(&s.plan, &cfg, s.pool, err, sizeof(err)))) goto done;
   nds_episode_cfg ec;
   nds_episode_cfg_default(&ec);
   ec.tau = tau;
 
-  printf(PROG ": world dt %.3f s, plan dt %.3f s, iCEM N %d C %d, %d worker(s), seed %llu\n",
-         s.world.m->opt.timestep, s.plan.m->opt.timestep, pop, iters, threads,
+  printf(PROG ": world dt %.3f s, plan dt %.3f s, iCEM N %d C %d, redraws %d, %d worker(s), "
+         "seed %llu\n", s.world.m->opt.timestep, s.plan.m->opt.timestep, pop, iters, redraws, threads,
          (unsigned long long)seed);
   int reached = 0, fine = 0;
   for (int g = 0; g < ngoals; g++) {
