@@ -76,7 +76,7 @@ void nd_cem_map(nd_cem *cem, nd_cem_map_fn fn, void *ctx);
  * thread. Only consulted when cfg.redraws > 0. */
 typedef int (*nd_cem_accept_fn)(void *ctx, const double *x);
 void nd_cem_set_accept(nd_cem *cem, nd_cem_accept_fn fn, void *ctx);
-/* Fresh samples drawn again in the last run (refused draws, kept last draws excluded). */
+/* Draws the accept callback refused and that were drawn again, in the last run. */
 int nd_cem_redrawn(const nd_cem *cem);
 
 /* Run cfg.iters iterations from the current distribution with generator r (all sampling

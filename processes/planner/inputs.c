@@ -50,7 +50,8 @@ void planner_task_summary(planner_proc *p, const char *how) {
   fprintf(stderr,
           PROG ": task %lld %s after %.2f s: %lld plans, %.1f plans/s over %.2f s of fresh "
           "state, plan %.1f ms mean / %.1f max, candidates beyond the limits %.1f %% / the "
-          "arm's %.1f %%, %.1f simulated per plan, %.1f redrawn, %lld mocap frames lost, %lld queue overflows\n",
+          "arm's %.1f %%, %.1f simulated per plan, %.1f redrawn, %lld mocap frames lost, "
+          "%lld queue overflows\n",
           (long long)p->task.task_id, how, dt, (long long)p->task_plans,
           live > 0 ? p->task_plans / live : 0.0, live, p->task_plans ? p->task_ms_sum / p->task_plans : 0.0,
           p->task_ms_max, p->task_evals ? 100.0 * p->task_over_limits / p->task_evals : 0.0,
