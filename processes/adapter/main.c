@@ -50,10 +50,7 @@ int main(int argc, char **argv) {
   ndp_signals();
   ndp_mujoco_handlers(PROG);
   /* Before any thread exists: the pool's workers inherit it. */
-  errno = 0;
-  if (o.nice > 0 && nice(o.nice) == -1 && errno)
-    fprintf(stderr, PROG ": nice(%d) refused (%s); running at normal priority\n", o.nice,
-            strerror(errno));
+  if (o.nice > 0) ndp_nice(PROG, o.nice);
   char err[512] = "";
   int status = 1;
   a.o = &o;

@@ -5,6 +5,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
 #include <sys/select.h>
 #include <time.h>
 #include <unistd.h>
@@ -166,4 +167,20 @@ int ndp_input_drained(ndp_input *in) {
 
 int ndp_input_fresh(const ndp_input *in, double now, double timeout) {
   return in->have && !in->behind && now - in->t <= timeout;
+}
+
+int ndp_nice(const char *prog, int n) {
+  if (setpriority(PRIO_PROCESS, 0, n)) {
+    fprintf(stderr, "%s: cannot set niceness %d: %s\n", prog, n, strerror(errno));
+    return -1;
+  }
+  FILE *f = getsid(0) == getpid() ? fopen("/proc/self/autogroup", "w") : NULL;
+  if (f) {
+    const int w = fprintf(f, "%d", n) < 0;
+    if (fclose(f) || w) {
+      fprintf(stderr, "%s: cannot set the autogroup's niceness %d: %s\n", prog, n, strerror(errno));
+      return -1;
+    }
+  }
+  return 0;
 }

@@ -57,6 +57,13 @@ double ndp_sent_mono(int64_t utime);
  * callers detect instabilities through mjData's warning counters. */
 void ndp_mujoco_handlers(const char *prog);
 
+/* Lower the whole process to niceness n (before its threads start: they inherit it), and
+ * its autogroup when it leads its session: under autogroup scheduling (Linux's default)
+ * niceness orders threads only within a session's group, and the groups share the CPU as
+ * equals; nudge-up starts every process in a session of its own. Run from a shell it
+ * leaves the shell's group alone. 0, or -1 with a message naming prog on stderr. */
+int ndp_nice(const char *prog, int n);
+
 /* The heartbeat every process publishes on STATUS. Counters are plain fields owned by
  * the process's main thread; a real-time process points loop at the newest statistics
  * its loop posted (nd_rtloop_stats_take). */

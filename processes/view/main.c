@@ -1,31 +1,14 @@
 /* nudge-view: a 3D view of the world, the goal and the plan, live or from a log, drawn
  * with MuJoCo's renderer (view.h says what each file does). */
-#include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/resource.h>
 #include <unistd.h>
 
 #include "nd_opt.h"
 #include "view.h"
 
 const char *const view_worlds[] = {"ideal", "lab", NULL};
-
-/* Take only CPU the other processes leave. Under autogroup scheduling (Linux's default)
- * niceness orders threads within their session's group and the groups share the CPU as
- * equals; nudge-up starts every process in a session of its own, so there the view's group
- * is the view (and its ffmpeg) and takes the niceness too. Run from a shell the view is in
- * the shell's group, which it leaves alone: start it with setsid for the same effect. */
-static void be_nice(int n) {
-  if (setpriority(PRIO_PROCESS, 0, n))
-    fprintf(stderr, PROG ": cannot set niceness %d: %s\n", n, strerror(errno));
-  FILE *f = getsid(0) == getpid() ? fopen("/proc/self/autogroup", "w") : NULL;
-  if (f) {
-    fprintf(f, "%d", n);
-    if (fclose(f)) fprintf(stderr, PROG ": cannot set the autogroup's niceness: %s\n", strerror(errno));
-  }
-}
 
 int main(int argc, char **argv) {
   static view_opts o;
@@ -35,7 +18,8 @@ int main(int argc, char **argv) {
   /* Software OpenGL (Mesa's llvmpipe, what Xvfb offers) starts a rasterizer thread per
    * core; one keeps the view off the planner's cores. A value set by the user stands. */
   setenv("LP_NUM_THREADS", "1", 0);
-  if (o.nice) be_nice(o.nice);
+  /* Take only CPU the other processes leave. */
+  if (o.nice) ndp_nice(PROG, o.nice);
   ndp_signals();
   ndp_mujoco_handlers(PROG);
   static view_app v;

@@ -43,7 +43,7 @@ demo() { # demo NAME WITH_VIEW
   local dir=$W/$1 up view=""
   if (($2)); then
     # In a session of its own, as nudge-up starts every process (--nice then acts on its
-    # autogroup too: see nudge-view's main.c).
+    # autogroup too: see ndp_nice in processes/common/ndp.h).
     pt_spawn view setsid "$VW" --hidden "${VIEW_ARGS[@]}" >"$W/$1.view.out" 2>"$W/$1.view.err"
     "$PT_BIN/nudge-status" --wait nudge-view --timeout 15 || pt_fail "$1: no heartbeat from the view"
   fi
