@@ -4,7 +4,9 @@
  * The optimiser works on theta / sigma0 per fitted parameter. Plain CEM is indifferent to
  * a per-coordinate scale, but the parameters span four decades (sliding ~1, rolling
  * ~1e-4), and nd_cem's one std floor and one bound tolerance are then meaningful for all
- * of them alike. */
+ * of them alike. A parameter whose prior spans decades (torsional friction started at 1
+ * against a truth near 0.005) is searched as ln theta: over a linear std of 1/16 of its
+ * range, the loss is flat for all of it (doc/decisions.md#log-fit). */
 #include "nds_fit.h"
 
 #include <math.h>
@@ -135,6 +137,11 @@ int nds_fit_cfg_check(const nds_fit_cfg *c, char *err, int errlen) {
       snprintf(err, errlen, "fit: fit[%d] (%s) = %d, must be 0 or 1", i, pname[i], c->fit[i]);
       return -1;
     }
+    if (c->logfit[i] != 0 && c->logfit[i] != 1) {
+      snprintf(err, errlen, "fit: logfit[%d] (%s) = %d, must be 0 or 1", i, pname[i],
+               c->logfit[i]);
+      return -1;
+    }
     nfit += c->fit[i];
     if (c->fit[i] && !(isfinite(c->mu0[i]) && isfinite(c->sigma0[i]) && c->sigma0[i] > 0)) {
       snprintf(err, errlen, "fit: %s prior mu0 = %g, sigma0 = %g: need finite, sigma0 > 0",
@@ -217,8 +224,10 @@ nds_fit *nds_fit_create(const nds_model *proto, const nds_fit_cfg *cfg, nd_pool 
   for (int i = 0; i < ND_NTHETA; i++) {
     if (!cfg->fit[i]) continue;
     f->idx[f->nfit] = i;
-    f->scale[f->nfit] = cfg->sigma0[i];
-    lower[f->nfit] = cfg->lower / cfg->sigma0[i];
+    f->logs[f->nfit] = cfg->logfit[i];
+    f->scale[f->nfit] = cfg->logfit[i] ? cfg->sigma0[i] / fmax(cfg->lower, cfg->mu0[i])
+                                       : cfg->sigma0[i];
+    lower[f->nfit] = nds_fit_x(f, f->nfit, cfg->lower);
     f->nfit++;
   }
   nd_cem_cfg cc;
@@ -278,8 +287,8 @@ int nds_fit_set_dist(nds_fit *f, const double mean[ND_NTHETA], const double std[
     return -1;
   }
   for (int j = 0; j < f->nfit; j++) {
-    xm[j] = mean[f->idx[j]] / f->scale[j];
-    xs[j] = std[f->idx[j]] / f->scale[j];
+    xm[j] = nds_fit_x(f, j, mean[f->idx[j]]);
+    xs[j] = nds_fit_xstd(f, j, mean[f->idx[j]], std[f->idx[j]]);
   }
   nd_cem_set_dist(f->cem, xm, xs);
   for (int i = 0; i < ND_NTHETA; i++)
@@ -294,9 +303,25 @@ void nds_fit_dist(const nds_fit *f, double mean[ND_NTHETA], double std[ND_NTHETA
     std[i] = 0;
   }
   for (int j = 0; j < f->nfit; j++) {
-    mean[f->idx[j]] = xm[j] * f->scale[j];
-    std[f->idx[j]] = xs[j] * f->scale[j];
+    mean[f->idx[j]] = nds_fit_th(f, j, xm[j]);
+    std[f->idx[j]] = nds_fit_thstd(f, j, mean[f->idx[j]], xs[j]);
   }
+}
+
+double nds_fit_x(const nds_fit *f, int j, double th) {
+  return f->logs[j] ? log(fmax(f->cfg.lower, th)) / f->scale[j] : th / f->scale[j];
+}
+
+double nds_fit_th(const nds_fit *f, int j, double x) {
+  return fmax(f->cfg.lower, f->logs[j] ? exp(x * f->scale[j]) : x * f->scale[j]);
+}
+
+double nds_fit_xstd(const nds_fit *f, int j, double th, double std) {
+  return f->logs[j] ? std / fmax(f->cfg.lower, th) / f->scale[j] : std / f->scale[j];
+}
+
+double nds_fit_thstd(const nds_fit *f, int j, double th, double xstd) {
+  return f->logs[j] ? xstd * f->scale[j] * th : xstd * f->scale[j];
 }
 
 int nds_fit_hold(nds_fit *f, int worker, const double th[ND_NTHETA]) {
@@ -310,7 +335,7 @@ int nds_fit_hold(nds_fit *f, int worker, const double th[ND_NTHETA]) {
 
 void nds_fit_to_theta(const nds_fit *f, const double *x, double *th) {
   memcpy(th, f->hold, sizeof(double) * ND_NTHETA);
-  for (int j = 0; j < f->nfit; j++) th[f->idx[j]] = fmax(f->cfg.lower, x[j] * f->scale[j]);
+  for (int j = 0; j < f->nfit; j++) th[f->idx[j]] = nds_fit_th(f, j, x[j]);
 }
 
 /* Put candidate c's complete total L into the nelite best of the batch (under lock). */
@@ -433,7 +458,7 @@ static void eval_batch(nds_fit *f, int ncand, int prune, double robust, double *
     for (int c = 0; c < ncand; c++) {
       double d2 = 0;
       for (int j = 0; j < f->nfit; j++) {
-        double e = f->theta[ND_NTHETA * c + f->idx[j]] / f->scale[j] - xm[j];
+        double e = nds_fit_x(f, j, f->theta[ND_NTHETA * c + f->idx[j]]) - xm[j];
         d2 += e * e;
       }
       f->done[c] = d2;  /* scratch until the pool runs */
@@ -532,8 +557,10 @@ int nds_fit_run(nds_fit *f, const nd_rollout *rs, int n, nds_fit_out *out, char 
   nd_rng r0 = f->rng;
   if (f->cfg.rel_floor > 0) {
     double xs[ND_NTHETA];
-    for (int j = 0; j < f->nfit; j++)
-      xs[j] = fmax(s0[j], f->cfg.rel_floor * fabs(m0[j]));
+    for (int j = 0; j < f->nfit; j++) {
+      const double th = nds_fit_th(f, j, m0[j]);
+      xs[j] = fmax(s0[j], nds_fit_xstd(f, j, th, f->cfg.rel_floor * th));
+    }
     nd_cem_set_dist(f->cem, m0, xs);
   }
   f->cost_lo = INFINITY;
@@ -562,7 +589,7 @@ int nds_fit_run(nds_fit *f, const nd_rollout *rs, int n, nds_fit_out *out, char 
     }
     double xs[ND_NTHETA];
     memcpy(xs, nd_cem_std(f->cem), sizeof(double) * f->nfit);
-    for (int j = 0; j < f->nfit; j++) xm[j] = th[f->idx[j]] / f->scale[j];
+    for (int j = 0; j < f->nfit; j++) xm[j] = nds_fit_x(f, j, th[f->idx[j]]);
     nd_cem_set_dist(f->cem, xm, xs);
   }
   nds_fit_dist(f, out->mean, out->std);

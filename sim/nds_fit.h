@@ -43,6 +43,9 @@ typedef struct {
   int fit[ND_NTHETA];         /* 1: fitted, 0: held at mu0 (at least one fitted) */
   double mu0[ND_NTHETA];      /* prior mean; a held parameter's value */
   double sigma0[ND_NTHETA];   /* prior std, > 0 where fitted */
+  int logfit[ND_NTHETA];      /* 1: searched as ln theta with std sigma0 / mu0 (a parameter
+                                  whose prior spans decades); its std in and out is then
+                                  theta times the std of ln theta. 0: as theta */
   double lower;                /* every fitted parameter stays >= lower > 0 (samples clipped) */
   double std_floor;            /* std never falls below std_floor * sigma0 (0: the paper's
                                   plain CEM, which freezes after a run or two) */

@@ -19,7 +19,8 @@ struct nds_fit {
   nd_cem *cem;
   nd_rng rng;
   int nfit, idx[ND_NTHETA];  /* fitted parameters, in theta order */
-  double scale[ND_NTHETA];   /* sigma0 of each fitted parameter (CEM space = theta / scale) */
+  double scale[ND_NTHETA];   /* CEM space: theta / scale, or ln theta / scale with logfit */
+  int logs[ND_NTHETA];       /* cfg.logfit of each fitted parameter */
   double hold[ND_NTHETA];    /* the full theta; fitted entries are overwritten per candidate */
 
   int cand_cap;         /* rows of theta: nd_cem_max_batch */
@@ -56,8 +57,14 @@ struct nds_fit {
  * not a valid theta (the worker then holds none). */
 int nds_fit_hold(nds_fit *f, int worker, const double th[ND_NTHETA]);
 
-/* Theta of point x in the fit's space: held entries, fitted ones x * sigma0 (kept at
- * lower, which the product may miss by a rounding). */
+/* Fitted parameter j between theta and the fit's space: its value (kept at lower), and
+ * its std at value th. */
+double nds_fit_x(const nds_fit *f, int j, double th);
+double nds_fit_th(const nds_fit *f, int j, double x);
+double nds_fit_xstd(const nds_fit *f, int j, double th, double std);
+double nds_fit_thstd(const nds_fit *f, int j, double th, double xstd);
+
+/* Theta of point x in the fit's space: held entries, fitted ones by nds_fit_th. */
 void nds_fit_to_theta(const nds_fit *f, const double *x, double *th);
 
 /* Refine the fitted entries of theta (in/out) by cfg.lm_iters Levenberg-Marquardt

@@ -116,8 +116,8 @@ static int lm_solve(nds_fit *f, const nd_rollout *rs, int n, int iters,
 
   double x[ND_NTHETA], lo[ND_NTHETA], hi[ND_NTHETA], sc[ND_NTHETA];
   for (int j = 0; j < f->nfit; j++) {
-    x[j] = theta[f->idx[j]] / f->scale[j];
-    lo[j] = f->cfg.lower / f->scale[j];
+    x[j] = nds_fit_x(f, j, theta[f->idx[j]]);
+    lo[j] = nds_fit_x(f, j, f->cfg.lower);
     hi[j] = 1e6;
     sc[j] = 1.0;
   }
@@ -145,8 +145,9 @@ static int lm_solve(nds_fit *f, const nd_rollout *rs, int n, int iters,
   out->lm_inflation = lo_out.inflation;
   for (int i = 0; i < ND_NTHETA; i++) out->lm_std[i] = 0.0;
   for (int j = 0; j < f->nfit; j++) {
-    theta[f->idx[j]] = fmax(f->cfg.lower, x[j] * f->scale[j]);
-    out->lm_std[f->idx[j]] = lo_out.rank_ok ? lo_out.std[j] * f->scale[j] : NAN;
+    theta[f->idx[j]] = nds_fit_th(f, j, x[j]);
+    out->lm_std[f->idx[j]] =
+        lo_out.rank_ok ? nds_fit_thstd(f, j, theta[f->idx[j]], lo_out.std[j]) : NAN;
   }
   rc = 0;
   goto done;

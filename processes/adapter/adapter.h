@@ -33,6 +33,7 @@ typedef struct {
   const char *buffer;
   char history[ND_RFILE_PATH_MAX];
   unsigned fit;               /* bit i: theta[i] fitted */
+  unsigned logfit;            /* bit i: theta[i] searched as ln theta */
   double theta[ND_NTHETA];    /* prior mean; value of held parameters */
   double ref[ND_NTHETA];      /* nominal theta the prior std is sized from */
   double D;                   /* prior uncertainty of the paper's formula */

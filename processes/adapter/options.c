@@ -34,6 +34,11 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
       {"fit", ND_OPT_CUSTOM, &o->fit, .parse = parse_fit, .arg = "LIST", .def = "slide,torsion,roll",
        .help = "fitted parameters, comma-separated from slide, torsion, roll, mass; the others "
                "are held at --theta"},
+      {"log-fit", ND_OPT_CUSTOM, &o->logfit, .parse = parse_fit, .arg = "LIST", .def = "none",
+       .help = "fitted parameters searched as ln theta, with the paper's prior std taken of "
+               "ln theta, ln((r + D r) / max(1e-7, r - D r)) / 16: for a prior that spans "
+               "decades, as torsional friction started at 1; held parameters ignore it "
+               "(doc/decisions.md#log-fit)"},
       {"theta", ND_OPT_THETA, o->theta, .def = "the simulation's ground truth",
        .help = "prior mean: sliding, torsional, rolling friction, sphere mass in kg (give the "
                "planner's --theta to start the loop from a wrong model)"},
@@ -107,6 +112,12 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
     fc->fit[i] = o->fit >> i & 1;
     fc->mu0[i] = o->theta[i];
     fc->sigma0[i] = (r + D * r - fmax(fc->lower, r - D * r)) / 16;
+    if ((o->logfit >> i & 1) && fc->fit[i]) {
+      /* nds_fit takes a log parameter's std as theta times the std of ln theta. */
+      fc->logfit[i] = 1;
+      fc->sigma0[i] = log((r + D * r) / fmax(fc->lower, r - D * r)) / 16 *
+                      fmax(fc->lower, o->theta[i]);
+    }
   }
   fc->replay.mode = o->replay_mode;
   fc->replay.window = o->replay_window;

@@ -653,6 +653,62 @@ static void test_fit_recovers_sliding(void **state) {
   nd_pool_free(pool);
 }
 
+/* A prior that spans decades: torsional friction started at 1 against the truth 0.005,
+ * fitted alone. One refit (Q 16, C 2) over a linear std of 1/16 of the prior range only
+ * starts down (step_std widens the std after the first step); searched as ln theta with
+ * the paper's std of ln theta it ends within a decade of the truth and replays the pushes
+ * better. The distribution goes out and back in theta units unchanged. */
+static void test_fit_log_torsion(void **state) {
+  (void)state;
+  char err[256];
+  nd_pool *pool = nd_pool_create(2, err, sizeof(err));
+  assert_non_null(pool);
+  nds_model nm;
+  nds_test_build(&nm, 0.001, NULL);
+  double end[2], Lend[2];
+  for (int log_on = 0; log_on < 2; log_on++) {
+    nds_fit_cfg cfg;
+    nds_fit_cfg_default(&cfg);
+    cfg.pop = 16;
+    cfg.iters = 2;
+    cfg.seed = 5;
+    cfg.fit[ND_TH_SLIDE] = cfg.fit[ND_TH_ROLL] = 0;
+    cfg.mu0[ND_TH_TORSION] = 1.0;
+    cfg.sigma0[ND_TH_TORSION] = (2.0 - 1e-7) / 16;  /* D = 1 about 1 */
+    if (log_on) {
+      cfg.logfit[ND_TH_TORSION] = 1;
+      cfg.sigma0[ND_TH_TORSION] = log(2.0 / 1e-7) / 16 * 1.0;
+    }
+    nds_fit *f = nds_fit_create(&nm, &cfg, pool, err, sizeof(err));
+    assert_non_null(f);
+    nds_fit_out out;
+    assert_int_equal(nds_fit_run(f, push, NPUSH, &out, err, sizeof(err)), 0);
+    end[log_on] = out.mean[ND_TH_TORSION];
+    Lend[log_on] = out.loss_mean;
+    printf("%s: torsion 1 -> %.4g (std %.3g), L(mean) %.3e\n", log_on ? "ln theta" : "theta",
+           out.mean[ND_TH_TORSION], out.std[ND_TH_TORSION], out.loss_mean);
+    double m[ND_NTHETA], s[ND_NTHETA], m2[ND_NTHETA], s2[ND_NTHETA];
+    nds_fit_dist(f, m, s);
+    assert_int_equal(nds_fit_set_dist(f, m, s, err, sizeof(err)), 0);
+    nds_fit_dist(f, m2, s2);
+    for (int i = 0; i < ND_NTHETA; i++) {
+      assert_near(m2[i], m[i], 1e-12 * fabs(m[i]));
+      assert_near(s2[i], s[i], 1e-12 * fabs(s[i]) + 1e-300);
+    }
+    nds_fit_free(f);
+  }
+  assert_true(end[1] < 0.05 && end[1] < end[0]);
+  assert_true(Lend[1] < 0.5 * Lend[0]);
+
+  nds_fit_cfg bad;
+  nds_fit_cfg_default(&bad);
+  bad.logfit[ND_TH_SLIDE] = 2;
+  assert_null(nds_fit_create(&nm, &bad, pool, err, sizeof(err)));
+  assert_non_null(strstr(err, "logfit[0] (slide)"));
+  nds_model_free(&nm);
+  nd_pool_free(pool);
+}
+
 /* Levenberg-Marquardt after a cheap CEM (Q 16, C 1) from the same far start, on records
  * the 1 ms model replays exactly: it lands on the truth, its interval is finite, and it
  * moves the distribution's mean (not its std). A bad lm_iters or lm_fd is refused. */
@@ -991,6 +1047,7 @@ int main(void) {
       cmocka_unit_test(test_torsion_landscape),
       cmocka_unit_test(test_fit_recovers_sliding),
       cmocka_unit_test(test_fit_refine),
+      cmocka_unit_test(test_fit_log_torsion),
       cmocka_unit_test(test_fit_workers_identical),
       cmocka_unit_test(test_fit_flat_no_contact),
       cmocka_unit_test(test_fit_bad_config),
