@@ -224,7 +224,6 @@ nds_fit *nds_fit_create(const nds_model *proto, const nds_fit_cfg *cfg, nd_pool 
   for (int i = 0; i < ND_NTHETA; i++) {
     if (!cfg->fit[i]) continue;
     f->idx[f->nfit] = i;
-    f->logs[f->nfit] = cfg->logfit[i];
     f->scale[f->nfit] = cfg->logfit[i] ? cfg->sigma0[i] / fmax(cfg->lower, cfg->mu0[i])
                                        : cfg->sigma0[i];
     lower[f->nfit] = nds_fit_x(f, f->nfit, cfg->lower);
@@ -308,20 +307,23 @@ void nds_fit_dist(const nds_fit *f, double mean[ND_NTHETA], double std[ND_NTHETA
   }
 }
 
+/* Fitted parameter j is searched as ln theta (cfg.logfit). */
+static int is_log(const nds_fit *f, int j) { return f->cfg.logfit[f->idx[j]]; }
+
 double nds_fit_x(const nds_fit *f, int j, double th) {
-  return f->logs[j] ? log(fmax(f->cfg.lower, th)) / f->scale[j] : th / f->scale[j];
+  return is_log(f, j) ? log(fmax(f->cfg.lower, th)) / f->scale[j] : th / f->scale[j];
 }
 
 double nds_fit_th(const nds_fit *f, int j, double x) {
-  return fmax(f->cfg.lower, f->logs[j] ? exp(x * f->scale[j]) : x * f->scale[j]);
+  return fmax(f->cfg.lower, is_log(f, j) ? exp(x * f->scale[j]) : x * f->scale[j]);
 }
 
 double nds_fit_xstd(const nds_fit *f, int j, double th, double std) {
-  return f->logs[j] ? std / fmax(f->cfg.lower, th) / f->scale[j] : std / f->scale[j];
+  return is_log(f, j) ? std / fmax(f->cfg.lower, th) / f->scale[j] : std / f->scale[j];
 }
 
 double nds_fit_thstd(const nds_fit *f, int j, double th, double xstd) {
-  return f->logs[j] ? xstd * f->scale[j] * th : xstd * f->scale[j];
+  return is_log(f, j) ? xstd * f->scale[j] * th : xstd * f->scale[j];
 }
 
 int nds_fit_hold(nds_fit *f, int worker, const double th[ND_NTHETA]) {

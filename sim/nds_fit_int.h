@@ -20,7 +20,6 @@ struct nds_fit {
   nd_rng rng;
   int nfit, idx[ND_NTHETA];  /* fitted parameters, in theta order */
   double scale[ND_NTHETA];   /* CEM space: theta / scale, or ln theta / scale with logfit */
-  int logs[ND_NTHETA];       /* cfg.logfit of each fitted parameter */
   double hold[ND_NTHETA];    /* the full theta; fitted entries are overwritten per candidate */
 
   int cand_cap;         /* rows of theta: nd_cem_max_batch */

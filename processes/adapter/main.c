@@ -1,5 +1,4 @@
 /* nudge-adapter: the incremental adaptation of theta (adapter.h says what each file does). */
-#include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
