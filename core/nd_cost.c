@@ -13,9 +13,12 @@
  * prox_lead = 8 cm, about the box's half length plus the sphere's radius: the tie-break
  *   then favours the side a push toward the goal starts from, so a sphere on the wrong side
  *   goes around instead of hovering (doc/decisions.md#prox-lead).
+ * w_edge = 10: a centimetre past the goal toward the box's edge costs 1e-3, the demo's eps,
+ *   where the same centimetre of L_pos costs 1e-4 (doc/decisions.md#edge-cost).
  * The arithmetic: doc/decisions.md#cost-weights. */
 nd_cost_weights nd_cost_weights_default(void) {
-  nd_cost_weights w = {.w_rot = 2e-2, .w_prox = 5e-3, .w_acc = 1e-5, .prox_lead = 0.08};
+  nd_cost_weights w = {.w_rot = 2e-2, .w_prox = 5e-3, .w_acc = 1e-5, .prox_lead = 0.08,
+                       .w_edge = 10.0};
   return w;
 }
 
@@ -39,6 +42,18 @@ void nd_cost_lead_point(double lead, const nd_goal *goal, const double obj_xy[2]
   const double r = fmax(hypot(gx, gy), ND_COST_LEAD_FADE);
   p[0] = obj_xy[0] - lead * gx / r;
   p[1] = obj_xy[1] - lead * gy / r;
+}
+
+double nd_cost_edge(const nd_cost_weights *w, const nd_goal *goal, const double obj_xy[2],
+                    const double lo[2], const double hi[2]) {
+  const double g[2] = {goal->x, goal->y};
+  double e = 0.0;
+  for (int i = 0; i < 2; i++) {
+    const double a = fmin(lo[i] + w->prox_lead, g[i]), b = fmax(hi[i] - w->prox_lead, g[i]);
+    const double d = fmax(0.0, a - obj_xy[i]) + fmax(0.0, obj_xy[i] - b);
+    e += d * d;
+  }
+  return e;
 }
 
 double nd_cost_plan(const nd_cost_weights *w, const nd_goal *goal, const double obj_xy[2],

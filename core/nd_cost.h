@@ -6,11 +6,11 @@
 #include "nd_goal.h"
 
 
-/* Weights of the plan cost E = L_pos + w_rot L_rot + w_prox L_prox + w_acc L_acc, and
- * prox_lead (m): how far behind the object, seen from the goal, L_prox wants the sphere
- * (0: at the object, the paper's term). */
+/* Weights of the plan cost E = L_pos + w_rot L_rot + w_prox L_prox + w_acc L_acc
+ * + w_edge L_edge, and prox_lead (m): how far behind the object, seen from the goal, L_prox
+ * wants the sphere (0: at the object, the paper's term). */
 typedef struct {
-  double w_rot, w_prox, w_acc, prox_lead;
+  double w_rot, w_prox, w_acc, prox_lead, w_edge;
 } nd_cost_weights;
 
 /* Within this distance of the goal's position the lead point fades into the object: the
@@ -33,8 +33,14 @@ double nd_cost_prox(const double obj_xy[2], const double ee_xy[2]);
  * ND_COST_LEAD_FADE), i.e. where a push toward the goal starts. */
 void nd_cost_lead_point(double lead, const nd_goal *goal, const double obj_xy[2], double p[2]);
 
-/* E of a rollout's final state (L_prox from the lead point); acc_sq_mean is L_acc, the
- * mean of |a_ee|^2 over its steps. */
+/* L_edge: how far (squared, m^2) the object is beyond where the sphere can still reach a
+ * lead point (the sphere's box [lo, hi] shrunk by prox_lead), per axis not counting the
+ * part up to the goal: a goal near the box's edge may be met, not overshot. */
+double nd_cost_edge(const nd_cost_weights *w, const nd_goal *goal, const double obj_xy[2],
+                    const double lo[2], const double hi[2]);
+
+/* E of a rollout's final state without L_edge (L_prox from the lead point); acc_sq_mean is
+ * L_acc, the mean of |a_ee|^2 over its steps. */
 double nd_cost_plan(const nd_cost_weights *w, const nd_goal *goal, const double obj_xy[2],
                     double obj_yaw, const double ee_xy[2], double acc_sq_mean);
 

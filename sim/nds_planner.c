@@ -154,7 +154,8 @@ static int plan_cost(void *ctx, const double *x, int n, double *cost) {
     const nds_rollout_out *o = &p->outs[k];
     cost[p->feas_idx[k]] =
         o->diverged ? INFINITY
-                    : nd_cost_plan(&c->w, p->goal, o->obj_xy, o->obj_yaw, o->ee_xy, o->acc_sq_mean);
+                    : nd_cost_plan(&c->w, p->goal, o->obj_xy, o->obj_yaw, o->ee_xy, o->acc_sq_mean) +
+                          c->w.w_edge * nd_cost_edge(&c->w, p->goal, o->obj_xy, c->ws_lo, c->ws_hi);
   }
   p->rollouts += m;
   return 0;

@@ -57,6 +57,37 @@ static void test_lead_point(void **state) {
               4.0 * 0.08 * 0.08, 1e-15);
 }
 
+/* L_edge on the lab's box [-0.15, 0.15] x [-0.30, 0.40] with the 8 cm lead: the object
+ * may stand anywhere the sphere can get behind it, and up to a goal beyond that, no farther. */
+static void test_edge(void **state) {
+  (void)state;
+  const nd_cost_weights w = nd_cost_weights_default();
+  const double lo[2] = {-0.15, -0.30}, hi[2] = {0.15, 0.40};
+  const nd_goal inner = {.x = 0.0, .y = 0.1}, near_edge = {.x = 0.14, .y = -0.04};
+  assert_near(nd_cost_edge(&w, &inner, (const double[2]){0.069, -0.219}, lo, hi), 0.0, 0.0);
+  assert_near(nd_cost_edge(&w, &inner, (const double[2]){-0.069, 0.319}, lo, hi), 0.0, 0.0);
+  /* 2 cm beyond x = 0.07 and 1 cm beyond y = -0.22. */
+  assert_near(nd_cost_edge(&w, &inner, (const double[2]){0.09, -0.23}, lo, hi), 4e-4 + 1e-4,
+              1e-15);
+  assert_near(nd_cost_edge(&w, &inner, (const double[2]){-0.10, 0.35}, lo, hi), 9e-4 + 9e-4,
+              1e-15);
+  /* A goal near the edge: free up to it, charged past it (the 2.5 cm overshoot that left
+   * the lab's object where no push could reach it). */
+  assert_near(nd_cost_edge(&w, &near_edge, (const double[2]){0.14, -0.04}, lo, hi), 0.0, 0.0);
+  assert_near(nd_cost_edge(&w, &near_edge, (const double[2]){0.165, -0.04}, lo, hi),
+              0.025 * 0.025, 1e-15);
+  /* Past the goal it outweighs the position term it trades against. */
+  const double past[2] = {0.15, -0.04}, short_[2] = {0.13, -0.04};
+  assert_true(nd_cost_pos(past, &near_edge) + w.w_edge * nd_cost_edge(&w, &near_edge, past, lo, hi) >
+              5.0 * (nd_cost_pos(short_, &near_edge) +
+                     w.w_edge * nd_cost_edge(&w, &near_edge, short_, lo, hi)));
+  /* No lead: the box itself. */
+  nd_cost_weights w0 = w;
+  w0.prox_lead = 0.0;
+  assert_near(nd_cost_edge(&w0, &inner, (const double[2]){0.149, 0.399}, lo, hi), 0.0, 0.0);
+  assert_near(nd_cost_edge(&w0, &inner, (const double[2]){0.16, 0.40}, lo, hi), 1e-4, 1e-15);
+}
+
 static void test_cuboid_symmetry(void **state) {
   (void)state;
   const double pi = 3.14159265358979323846;
@@ -128,6 +159,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_known_values),
       cmocka_unit_test(test_lead_point),
+      cmocka_unit_test(test_edge),
       cmocka_unit_test(test_cuboid_symmetry),
       cmocka_unit_test(test_default_weights),
       cmocka_unit_test(test_terminal_condition),
