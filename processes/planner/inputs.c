@@ -78,6 +78,7 @@ static void use_task(void *user, const nudge_task_t *m) {
   p->task_ms_sum = p->task_ms_max = p->task_stale = 0.0;
   p->task_evals = p->task_over_limits = p->task_over_arm = 0;
   p->task_rollouts = p->task_redrawn = 0;
+  p->edge_warned = 0;
   p->task_mocap_lost0 = p->mocap_lost;
   p->task_overflows0 = p->overflows;
   nds_planner_reset(p->planner);

@@ -3,6 +3,7 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "nd_cost.h"
 #include "nd_exec.h"
 #include "planner.h"
 
@@ -29,6 +30,19 @@ int planner_plan_once(planner_proc *p, double now, char *err, int errlen) {
     sp0[k][3] = cmd_ok ? p->cmd.j[k] : 0.0;
   }
   const nd_goal goal = {.x = p->task.goal_x, .y = p->task.goal_y, .yaw = p->task.goal_yaw};
+  if (!p->edge_warned) {
+    const nds_planner_cfg *pc = nds_planner_config(p->planner);
+    nd_cost_weights box = pc->w;
+    box.prox_lead = 0.0; /* L_edge of the box itself */
+    const double e = sqrt(nd_cost_edge(&box, &goal, s.obj_pos, pc->ws_lo, pc->ws_hi));
+    if (e > PLANNER_EDGE_WARN) {
+      fprintf(stderr, PROG ": task %lld: the object at (%+.3f, %+.3f) m lies %.3f m outside the "
+              "keypoint box x [%g, %g] y [%g, %g] m: the sphere cannot get behind it to push it "
+              "back\n", (long long)p->task.task_id, s.obj_pos[0], s.obj_pos[1], e,
+              pc->ws_lo[0], pc->ws_hi[0], pc->ws_lo[1], pc->ws_hi[1]);
+      p->edge_warned = 1;
+    }
+  }
 
   double t0 = ndp_mono();
   int64_t start_utime = 0;

@@ -39,6 +39,9 @@ typedef struct {
  * is quicker waits. The prefix is at most PLANNER_PRE_MAX model steps. */
 #define PLANNER_LEAD_GAIN 1.2
 #define PLANNER_LEAD_MARGIN 0.004
+/* An object centre this far (m) beyond the keypoint box, and beyond its goal, is logged
+ * once per task: the sphere cannot get behind it to push it back. */
+#define PLANNER_EDGE_WARN 0.005
 #define PLANNER_PRE_MAX 256
 
 /* Niceness the planning threads add to the process's: below its LCM receive thread. */
@@ -74,6 +77,7 @@ typedef struct {
   int64_t task_evals, task_over_limits, task_over_arm; /* candidates, and those penalised */
   int64_t task_rollouts, task_redrawn; /* candidates simulated, and fresh draws drawn again */
   double task_stale;           /* s of the task spent without fresh state */
+  int edge_warned;             /* the task's object was logged beyond the sphere's reach */
 
   double plan_s;               /* recent plan time, s (moving average) */
   double pre_sp[PLANNER_PRE_MAX][2][4]; /* the prefix's setpoints, one per model step */

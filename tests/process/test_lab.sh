@@ -20,6 +20,9 @@
 #    least as many), the run stops cleanly and leaves nothing behind. How many goals it
 #    reaches is printed (lab_reached) and asserted only >= 1: a starved planner on a
 #    loaded 2-core VM stops and goes (test_system says why).
+# 4. An object left outside the arm's box (x 0.165, where the lab box ends at 0.15): one
+#    short task toward the box's inside; the planner's log says where the object is and
+#    that the sphere cannot get behind it, once, and the task ends.
 set -u
 PT_NAME=test_lab
 . "$(dirname "${BASH_SOURCE[0]}")/../tools/process-lib.sh"
@@ -155,4 +158,18 @@ pt_check "every stop in a task is reported (runner $counted, task lines $stopped
 pt_check "the bridge ran the lab world" grep -q 'lab world' "$DEMO/bridge.log"
 pt_restarts_are "$DEMO"
 pt_none_left "$DEMO"
+
+# --- 4. an object outside the arm's box ------------------------------------------------
+EDGE=$PT_WORK/edge
+"$PT_BIN/nudge-up" demo --world lab --log-dir "$EDGE" --bridge-arg --object \
+  --bridge-arg 0.165,-0.039,-0.3 -- --goal 0.08,0.12,0.4 --tau "$(pt_slow 1)" \
+  >"$PT_WORK/edge.out" 2>"$PT_WORK/edge.err"
+rc=$?
+pt_check "nudge-up demo with the object outside the box exits 0 (got $rc)" test "$rc" -eq 0
+cat "$PT_WORK/edge.out"
+grep 'outside the keypoint box' "$EDGE/planner.log"
+pt_check "the planner logged the object outside the keypoint box, once" \
+  test "$(grep -cE 'the object at \(\+0\.16[0-9], -0\.0[34][0-9]\) m lies 0\.01[0-9] m outside the keypoint box x \[-0\.15, 0\.15\].*cannot get behind it' "$EDGE/planner.log")" -eq 1
+pt_check "the task ended" grep -qE '^task 1/1 .*(reached|timed out|stopped after)' "$PT_WORK/edge.out"
+pt_none_left "$EDGE"
 exit $((PT_FAILS > 0))
