@@ -18,8 +18,9 @@
 # 3. nudge-up demo --world lab on the lab goal chain: all five tasks run, every stop is
 #    reported (the runner's reflex_stops equals its stopped tasks, the bridge logged at
 #    least as many), the run stops cleanly and leaves nothing behind. How many goals it
-#    reaches is printed (lab_reached) and asserted only >= 1: a starved planner on a
-#    loaded 2-core VM stops and goes (test_system says why).
+#    reaches is printed (lab_reached) and asserted only >= 1, at the task runner's eps 1e-2
+#    rather than the demo's 1e-3: a starved planner on a loaded 2-core VM stops and goes
+#    (test_system says why), and the arm it leaves behind may stop on its reflexes.
 # 4. An object left outside the arm's box (x 0.165, where the lab box ends at 0.15): one
 #    short task toward the box's inside; the planner's log says where the object is and
 #    that the sphere cannot get behind it, once, and the task ends.
@@ -136,7 +137,7 @@ fi
 
 # --- 3. the lab goal chain -------------------------------------------------------------
 DEMO=$PT_WORK/demo
-pt_spawn demo "$PT_BIN/nudge-up" demo --world lab --log-dir "$DEMO" -- --tau "$(pt_slow 5)" \
+pt_spawn demo "$PT_BIN/nudge-up" demo --world lab --log-dir "$DEMO" -- --eps 1e-2 --tau "$(pt_slow 5)" \
   >"$PT_WORK/demo.out" 2>"$PT_WORK/demo.err"
 if pt_wait_pid "$demo" 120; then
   pt_check "nudge-up demo --world lab exits 0 (got $PT_RC)" test "$PT_RC" -eq 0
