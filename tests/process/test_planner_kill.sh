@@ -5,7 +5,7 @@
 #   netns-run bash test_planner_kill.sh BUILD_DIR
 #
 # `nudge-up run` + lcm-logger + nudge-tasks on one far goal (tau 15 s; it usually takes
-# 1.2-2.1 s). Once plans flow and the end-effector moves, SIGKILL the planner.
+# 1.5-2.5 s). Once plans flow and the end-effector moves, SIGKILL the planner.
 # From the log, measured from the last PLAN: the executor gives up on it by its plan
 # timeout (--plan-timeout 0.1 s) + 20 ms, and the setpoints are at rest (HOLDING, zero speed)
 # within the timeout plus 100 ms. That budget holds the brake from slow pushing (speed at
@@ -29,10 +29,10 @@ RUN=$PT_WORK/run
 # (NUDGE_SLOW) plans less often than that, and the executor would brake between any two
 # plans; its timeout is scaled so that it tracks until the kill, as in a Release run.
 TIMEOUT_S=$(pt_slow 0.1)
-# ~30 cm from the object's start at the origin, within eps 2e-3 (about 4.5 cm): at the task
-# runner's 1e-2 (about 10 cm) the planner can meet it before the kill, and at the demo's 1e-3
-# (about 3 cm) a push now and then ends 3-4 cm off and circles there until the time limit.
-GOAL=0.30,0.05,0,2e-3
+# ~40 cm from the object's start at the origin, within eps 2e-3 (about 4.5 cm): at the demo's
+# 1e-3 (about 3 cm) a push now and then ends 3-4 cm off and circles there until the time
+# limit, and nearer goals (30 cm) were met before the kill in a slow (ASan) build.
+GOAL=0.40,0.05,0,2e-3
 
 pt_logger "$LOG"
 pt_spawn up "$PT_BIN/nudge-up" run --log-dir "$RUN" --executor-arg --timeout \
@@ -43,7 +43,7 @@ pt_ok "nudge-up run: all processes up"
 
 pt_spawn tasks "$PT_BIN/nudge-tasks" --goal "$GOAL" --tau "$(pt_slow 15)" >"$PT_WORK/tasks.out" \
   2>"$PT_WORK/tasks.err"
-if ! pt_wait_for 15 "$PT_LC" live "$LOG" --min-plans 5 --min-speed 0.05; then
+if ! pt_wait_for 15 "$PT_LC" live "$LOG" --min-plans 3 --min-speed 0.05; then
   pt_fail "no plans or no motion within $((15 * PT_SLOW)) s of the task's start"
   "$PT_LC" live "$LOG"
   exit 1
