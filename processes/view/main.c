@@ -1,5 +1,6 @@
 /* nudge-view: a 3D view of the world, the goal and the plan, live or from a log, drawn
  * with MuJoCo's renderer (view.h says what each file does). */
+#include <malloc.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -18,6 +19,11 @@ int main(int argc, char **argv) {
   /* Software OpenGL (Mesa's llvmpipe, what Xvfb offers) starts a rasterizer thread per
    * core; one keeps the view off the planner's cores. A value set by the user stands. */
   setenv("LP_NUM_THREADS", "1", 0);
+  /* Mesa allocates and frees buffers of several MB every frame. Above glibc's mmap
+   * threshold each is a fresh mapping whose pages fault in as they are first written;
+   * kept in the heap they are reused (decisions: view-cpu). */
+  mallopt(M_MMAP_THRESHOLD, 32 << 20);
+  mallopt(M_TRIM_THRESHOLD, 256 << 20);
   /* Take only CPU the other processes leave. */
   if (o.nice) ndp_nice(PROG, o.nice);
   ndp_signals();

@@ -13,6 +13,8 @@
 #   view_sys_fps          frames the view rendered per second of wall time (target >= 30)
 #   view_sys_frames_late  frame slots it missed (live: each is the previous frame repeated)
 #   view_sys_frame_ms_*   one frame's work (scene, render, read-back, write)
+#   view_sys_cpu_cores    the view process's CPU time (all its threads, not ffmpeg's) over
+#                         its wall time: what it takes from the planner's two cores
 #   planner_rate_without  plans/s with no view, mean over rounds
 #   planner_rate_with     plans/s with the view
 #   planner_rate_cost     1 - with/without, percent (the budget is 10 %)
@@ -39,6 +41,12 @@ planner_rate() {
     "$1/planner.log" | awk '{ p += $1; s += $2 } END { if (s > 0) printf "%.2f", p / s; else print 0 }'
 }
 
+# cpu_cores PID: the process's user + system time over the time since it started.
+cpu_cores() {
+  awk -v hz="$(getconf CLK_TCK)" 'NR == FNR { up = $1; next }
+    { sub(/^.*\) /, ""); printf "%.3f", ($12 + $13) / hz / (up - $20 / hz) }' /proc/uptime "/proc/$1/stat"
+}
+
 demo() { # demo NAME WITH_VIEW
   local dir=$W/$1 up view=""
   if (($2)); then
@@ -50,6 +58,7 @@ demo() { # demo NAME WITH_VIEW
   pt_spawn up "$PT_BIN/nudge-up" demo --log-dir "$dir" >"$W/$1.out" 2>"$W/$1.err"
   pt_wait_pid "$up" 300 || pt_fail "$1: nudge-up demo did not finish"
   if [[ -n $view ]]; then
+    VIEW_CORES=$(cpu_cores "$view")
     kill -INT "$view"
     pt_wait_pid "$view" 30 || pt_fail "$1: the view did not stop"
   fi
@@ -57,7 +66,7 @@ demo() { # demo NAME WITH_VIEW
   pt_say "$1: planner $RATE plans/s, $(grep -c . "$dir/planner.log") log lines; $(tail -n 1 "$W/$1.out")"
 }
 
-with=() without=()
+with=() without=() cores=()
 for ((r = 1; r <= ROUNDS; r++)); do
   if ((r % 2)); then
     demo "r$r-without" 0; without+=("$RATE")
@@ -71,6 +80,8 @@ for ((r = 1; r <= ROUNDS; r++)); do
   pt_figure "view_sys_frames_late_r$r" "$(vw_fig "$o" view_frames_late)" count
   pt_figure "view_sys_frame_ms_mean_r$r" "$(vw_fig "$o" view_frame_ms_mean)" ms
   pt_figure "view_sys_frame_ms_p99_r$r" "$(vw_fig "$o" view_frame_ms_p99)" ms
+  pt_figure "view_sys_cpu_cores_r$r" "$VIEW_CORES" cores
+  cores+=("$VIEW_CORES")
   pt_figure "planner_rate_without_r$r" "${without[-1]}" per_s
   pt_figure "planner_rate_with_r$r" "${with[-1]}" per_s
 done
@@ -79,6 +90,7 @@ a=$(mean "${without[@]}")
 b=$(mean "${with[@]}")
 fps=$(for ((r = 1; r <= ROUNDS; r++)); do vw_fig "$W/r$r-with.view.out" view_fps; done | awk '{ s += $1 } END { printf "%.2f", s / NR }')
 pt_figure view_sys_fps "$fps" per_s
+pt_figure view_sys_cpu_cores "$(mean "${cores[@]}")" cores
 pt_figure planner_rate_without "$a" per_s
 pt_figure planner_rate_with "$b" per_s
 pt_figure planner_rate_cost "$(awk -v a="$a" -v b="$b" 'BEGIN { printf "%.1f", (a > 0 ? 100 * (1 - b / a) : 0) }')" percent
