@@ -108,18 +108,33 @@ wait_log() {
   done
 }
 
-# trapped PID: poll every 1 ms (no fork) until PID catches SIGTERM, i.e. nudge-up has set
-# its traps (bash itself catches SIGINT from its start); 1 after 5 s or if PID is gone.
+# trapped PID: poll every 1 ms (no fork) until PID is nudge-up's bash and catches SIGTERM,
+# i.e. nudge-up has set its traps (bash itself catches SIGINT from its start); 1 after 5 s
+# or if PID is gone. The command line is read before and after the status: between the
+# fork and its exec, PID is a copy of this shell and catches SIGTERM through our trap;
+# a SIGINT sent then reaches nothing of nudge-up's (with SIGINT ignored, as `&` starts it,
+# not even a later one), and the trial would wait on a supervisor that was never told.
 trapped() {
-  local key val n
+  local key val n cgt
   for ((n = 0; n < 5000; n++)); do
     [[ -e /proc/$1/status ]] || return 1
-    while read -r key val; do
-      [[ $key == SigCgt: ]] && ((16#$val & 1 << 14)) && return 0
-    done 2>/dev/null <"/proc/$1/status"
+    cgt=0
+    if is_up "$1"; then
+      while read -r key val; do
+        [[ $key == SigCgt: ]] && cgt=$((16#$val))
+      done 2>/dev/null <"/proc/$1/status"
+      ((cgt & 1 << 14)) && is_up "$1" && return 0
+    fi
     read -r -t 0.001 _ <>"$STAND/.idle"
   done
   return 1
+}
+
+# is_up PID: PID runs nudge-up under bash (its argv is bash, then nudge-up's path).
+is_up() {
+  local -a argv=()
+  mapfile -d '' -t argv 2>/dev/null <"/proc/$1/cmdline"
+  [[ ${argv[0]:-} == *bash && ${argv[1]:-} == */nudge-up ]]
 }
 
 # The pid of nudge-NAME as logged in DIR ("nudge-NAME up (pid N)").
