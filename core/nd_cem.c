@@ -32,6 +32,7 @@ struct nd_cem {
   double *x;          /* cap x dim candidates */
   double *cost;       /* cap */
   int *order;         /* cap: row indices, elites first after selection */
+  int *ok;            /* cap: the accept callback's answers */
 
   double *keep;       /* nkeep x dim kept elites */
   double *keep_cost;  /* nkeep */
@@ -185,6 +186,7 @@ nd_cem *nd_cem_create(const nd_cem_cfg *cfg, char *err, int errlen) {
   ND_CEM_ALLOC(cem->x, (size_t)cem->cap * D, double);
   ND_CEM_ALLOC(cem->cost, (size_t)cem->cap, double);
   ND_CEM_ALLOC(cem->order, (size_t)cem->cap, int);
+  ND_CEM_ALLOC(cem->ok, (size_t)cem->cap, int);
   ND_CEM_ALLOC(cem->keep, (size_t)(cem->nkeep > 0 ? cem->nkeep : 1) * D, double);
   ND_CEM_ALLOC(cem->keep_cost, (size_t)(cem->nkeep > 0 ? cem->nkeep : 1), double);
   ND_CEM_ALLOC(cem->mean, D, double);
@@ -221,6 +223,7 @@ void nd_cem_free(nd_cem *cem) {
   free(cem->x);
   free(cem->cost);
   free(cem->order);
+  free(cem->ok);
   free(cem->keep);
   free(cem->keep_cost);
   free(cem->mean);
@@ -361,6 +364,36 @@ static void nd_cem_update(nd_cem *cem) {
   }
 }
 
+/* Draw the n fresh candidates x the accept callback refuses again, up to cfg.redraws
+ * times. Refused rows are moved to the tail, so each round asks about one contiguous
+ * block; the fresh draws are exchangeable, so their order carries nothing. */
+static void nd_cem_redraw(nd_cem *cem, nd_rng *r, double *x, int n) {
+  const int D = cem->dim;
+  int *ok = cem->ok;
+  for (int k = 0; k < cem->cfg.redraws && n > 0; k++) {
+    cem->accept(cem->accept_ctx, x, n, ok);
+    int lo = 0, hi = n - 1;  /* after the loop: [0, lo) accepted, [lo, n) refused */
+    while (lo <= hi) {
+      if (ok[lo]) {
+        lo++;
+      } else if (!ok[hi]) {
+        hi--;
+      } else {
+        for (int j = 0; j < D; j++) {
+          const double t = x[(size_t)lo * D + j];
+          x[(size_t)lo * D + j] = x[(size_t)hi * D + j];
+          x[(size_t)hi * D + j] = t;
+        }
+        lo++, hi--;
+      }
+    }
+    x += (size_t)lo * D;
+    n -= lo;
+    for (int i = 0; i < n; i++) nd_cem_sample(cem, r, x + (size_t)i * D);
+    cem->redrawn += n;
+  }
+}
+
 int nd_cem_run(nd_cem *cem, nd_rng *r, nd_cem_cost_fn fn, void *ctx) {
   const nd_cem_cfg *cfg = &cem->cfg;
   size_t D = (size_t)cem->dim;
@@ -376,14 +409,8 @@ int nd_cem_run(nd_cem *cem, nd_rng *r, nd_cem_cost_fn fn, void *ctx) {
     int n = nk + nfresh + inject;
 
     if (nk > 0) memcpy(cem->x, cem->keep, (size_t)nk * D * sizeof(double));
-    for (int i = 0; i < nfresh; i++) {
-      double *x = cem->x + (size_t)(nk + i) * D;
-      nd_cem_sample(cem, r, x);
-      for (int k = 0; k < cfg->redraws && cem->accept && !cem->accept(cem->accept_ctx, x); k++) {
-        nd_cem_sample(cem, r, x);
-        cem->redrawn++;
-      }
-    }
+    for (int i = 0; i < nfresh; i++) nd_cem_sample(cem, r, cem->x + (size_t)(nk + i) * D);
+    if (cem->accept) nd_cem_redraw(cem, r, cem->x + (size_t)nk * D, nfresh);
     if (inject) memcpy(cem->x + (size_t)(n - 1) * D, cem->mean, D * sizeof(double));
 
     int first = 0;

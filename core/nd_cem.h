@@ -72,9 +72,10 @@ void nd_cem_shift(nd_cem *cem, int steps, const double *std_init);
 typedef void (*nd_cem_map_fn)(void *ctx, double *x);
 void nd_cem_map(nd_cem *cem, nd_cem_map_fn fn, void *ctx);
 
-/* Whether candidate x (dim values) is worth evaluating; cheap, called on the sampling
- * thread. Only consulted when cfg.redraws > 0. */
-typedef int (*nd_cem_accept_fn)(void *ctx, const double *x);
+/* Set ok[i] to whether candidate x[i * dim ..) of n is worth evaluating. Called with an
+ * iteration's fresh draws, then with those refused and drawn again, so the caller may
+ * check them in parallel. Only consulted when cfg.redraws > 0. */
+typedef void (*nd_cem_accept_fn)(void *ctx, const double *x, int n, int *ok);
 void nd_cem_set_accept(nd_cem *cem, nd_cem_accept_fn fn, void *ctx);
 /* Draws the accept callback refused and that were drawn again, in the last run. */
 int nd_cem_redrawn(const nd_cem *cem);

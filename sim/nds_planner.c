@@ -28,6 +28,14 @@ struct nds_planner {
   int rollouts;              /* candidates simulated in it */
   double *feas;              /* cap x dim: the candidates within the limits, simulated */
   int *feas_idx;             /* their index in the batch */
+  /* the limit checks on the pool: their candidates, and per candidate the answers */
+  const double *chk_x;
+  int *chk_ok, *chk_cart, *chk_arm;
+  double *chk_ex;
+  /* the cheapest candidate simulated in the plan in progress, and its rollout */
+  double seen_cost;
+  double seen_x[4 * ND_MAX_KEYS];
+  nds_rollout_out seen_out;
 };
 
 void nds_planner_cfg_default(nds_planner_cfg *cfg) {
@@ -66,13 +74,15 @@ void nds_planner_cfg_default(nds_planner_cfg *cfg) {
 
 /* Peaks over the setpoints of keys from sp0, sampled at the rollouts' step: speed,
  * acceleration and, with an arm, its load (nds_reach_load). The setpoints alone decide
- * them: no physics needed. */
-static void setpoint_peaks(const nds_planner *p, const double *keys, double peak[3]) {
+ * them: no physics needed. With early set it stops at the first sample beyond a limit,
+ * its peaks then only a lower bound. */
+static void setpoint_peaks(const nds_planner *p, const double *keys, int early, double peak[3]) {
   const nds_planner_cfg *c = &p->cfg;
   nd_snap_seg seg;
   double s[2][4], sp[2][4];
   memcpy(s, p->sp0, sizeof(s));
   const int n = (int)ceil(c->T / nds_batch_model(p->batch, 0)->m->opt.timestep - 1e-9);
+  const double v2_max = c->v_max * c->v_max, a2_max = c->a_max * c->a_max;
   double v2 = 0.0, a2 = 0.0, load = 0.0;
   for (int i = 0; i < c->M; i++) {
     const double *k = keys + 4 * i;
@@ -89,9 +99,11 @@ static void setpoint_peaks(const nds_planner *p, const double *keys, double peak
         const double l = nds_reach_load(c->reach, pos, vel, acc);
         if (!(l <= load)) load = l;
       }
+      if (early && !(v2 <= v2_max && a2 <= a2_max && load <= c->reach_max)) goto out;
     }
     nd_snap_seg_eval(&seg, c->T, s);
   }
+out:
   peak[0] = sqrt(v2);
   peak[1] = sqrt(a2);
   peak[2] = load;
@@ -108,11 +120,12 @@ void nds_planner_cfg_fit_limits(nds_planner_cfg *cfg) {
 }
 
 /* A candidate's relative excess over the limits, 0 within them; *cart and *arm say which
- * were broken. */
-static double limit_excess(const nds_planner *p, const double *keys, int *cart, int *arm) {
+ * were broken. With early set, any positive excess only says "beyond" (setpoint_peaks). */
+static double limit_excess(const nds_planner *p, const double *keys, int early, int *cart,
+                           int *arm) {
   const nds_planner_cfg *c = &p->cfg;
   double pk[3];
-  setpoint_peaks(p, keys, pk);
+  setpoint_peaks(p, keys, early, pk);
   double ex = fmax(0.0, pk[0] / c->v_max - 1.0) + fmax(0.0, pk[1] / c->a_max - 1.0);
   *cart = ex > 0.0;
   *arm = 0;
@@ -125,23 +138,42 @@ static double limit_excess(const nds_planner *p, const double *keys, int *cart, 
   return ex;
 }
 
+/* The limit checks run on the rollouts' pool: with an arm and redraws they are about a
+ * fifth of a plan's work (doc/decisions.md#plan-parallel). */
+static void accept_task(void *ctx, int task, int worker) {
+  (void)worker;
+  nds_planner *p = ctx;
+  int cart, arm;
+  p->chk_ok[task] = limit_excess(p, p->chk_x + (size_t)task * p->dim, 1, &cart, &arm) <= 0.0;
+}
+
+static void excess_task(void *ctx, int task, int worker) {
+  (void)worker;
+  nds_planner *p = ctx;
+  p->chk_ex[task] = limit_excess(p, p->chk_x + (size_t)task * p->dim, 0, &p->chk_cart[task],
+                                 &p->chk_arm[task]);
+}
+
 /* Sampling keeps to what the robot can do (nd_cem's redraws): a draw beyond the limits is
  * drawn again. */
-static int plan_accept(void *ctx, const double *x) {
-  int cart, arm;
-  return limit_excess(ctx, x, &cart, &arm) <= 0.0;
+static void plan_accept(void *ctx, const double *x, int n, int *ok) {
+  nds_planner *p = ctx;
+  p->chk_x = x;
+  p->chk_ok = ok;
+  nd_pool_run(nds_batch_pool(p->batch), n, accept_task, p);
 }
 
 static int plan_cost(void *ctx, const double *x, int n, double *cost) {
   nds_planner *p = ctx;
   const nds_planner_cfg *c = &p->cfg;
   if (n > p->cap) return -1;
+  p->chk_x = x;
+  nd_pool_run(nds_batch_pool(p->batch), n, excess_task, p);
   int m = 0;
   for (int i = 0; i < n; i++) {
-    int cart, arm;
-    const double ex = limit_excess(p, x + i * p->dim, &cart, &arm);
-    p->over_limits += cart;
-    p->over_arm += arm;
+    const double ex = p->chk_ex[i];
+    p->over_limits += p->chk_cart[i];
+    p->over_arm += p->chk_arm[i];
     if (!(ex <= 0.0)) {
       cost[i] = c->limit_penalty * (1.0 + (isfinite(ex) ? ex : 1e3));
       continue;
@@ -152,10 +184,16 @@ static int plan_cost(void *ctx, const double *x, int n, double *cost) {
   if (m > 0) nds_batch_rollouts(p->batch, &c->ctrl, p->s, p->sp0, p->feas, m, c->M, c->T, p->outs);
   for (int k = 0; k < m; k++) {
     const nds_rollout_out *o = &p->outs[k];
-    cost[p->feas_idx[k]] =
-        o->diverged ? INFINITY
-                    : nd_cost_plan(&c->w, p->goal, o->obj_xy, o->obj_yaw, o->ee_xy, o->acc_sq_mean) +
-                          c->w.w_edge * nd_cost_edge(&c->w, p->goal, o->obj_xy, c->ws_lo, c->ws_hi);
+    const int i = p->feas_idx[k];
+    cost[i] = o->diverged ? INFINITY
+                          : nd_cost_plan(&c->w, p->goal, o->obj_xy, o->obj_yaw, o->ee_xy, o->acc_sq_mean) +
+                                c->w.w_edge * nd_cost_edge(&c->w, p->goal, o->obj_xy, c->ws_lo, c->ws_hi);
+    /* The best rollout so far, so the plan's prediction needs no rollout of its own. */
+    if (cost[i] < p->seen_cost) {
+      p->seen_cost = cost[i];
+      p->seen_out = *o;
+      memcpy(p->seen_x, x + i * p->dim, sizeof(double) * p->dim);
+    }
   }
   p->rollouts += m;
   return 0;
@@ -217,11 +255,14 @@ nds_planner *nds_planner_create(const nds_model *model, const nds_planner_cfg *c
   p->cap = nd_cem_max_batch(p->cem);
   if (!(p->outs = calloc(p->cap, sizeof(*p->outs))) ||
       !(p->feas = calloc((size_t)p->cap * p->dim, sizeof(double))) ||
-      !(p->feas_idx = calloc(p->cap, sizeof(int)))) {
+      !(p->feas_idx = calloc(p->cap, sizeof(int))) ||
+      !(p->chk_cart = calloc(2 * (size_t)p->cap, sizeof(int))) ||
+      !(p->chk_ex = calloc(p->cap, sizeof(double)))) {
     snprintf(err, errlen, "planner: out of memory");
     nds_planner_free(p);
     return NULL;
   }
+  p->chk_arm = p->chk_cart + p->cap;
   p->batch = nds_batch_create(model, pool, err, errlen);
   if (!p->batch) {
     nds_planner_free(p);
@@ -239,6 +280,8 @@ void nds_planner_free(nds_planner *p) {
   free(p->outs);
   free(p->feas);
   free(p->feas_idx);
+  free(p->chk_cart);
+  free(p->chk_ex);
   free(p->lower);
   free(p);
 }
@@ -310,6 +353,7 @@ int nds_planner_plan(nds_planner *p, const nds_state *s, const double sp0[2][4],
   p->sp0 = sp0;
   p->goal = goal;
   p->over_limits = p->over_arm = p->rollouts = 0;
+  p->seen_cost = INFINITY;
   int rc = nd_cem_run(p->cem, &p->rng, plan_cost, p);
   if (rc) {
     snprintf(err, errlen, "planner: rollout batch larger than %d", p->cap);
@@ -325,11 +369,15 @@ int nds_planner_plan(nds_planner *p, const nds_state *s, const double sp0[2][4],
   out->over_limits = p->over_limits;
   out->over_arm = p->over_arm;
   out->redrawn = nd_cem_redrawn(p->cem);
-  /* What the best plan predicts, for logging, drawing and the plan message; a diverged
-   * rollout predicts the object stays where it is. */
+  /* What the best plan predicts, for logging, drawing and the plan message: the rollout
+   * that ranked it, or (when the best was never simulated) its own; a diverged rollout
+   * predicts the object stays where it is. */
   nds_rollout_out o;
-  nds_rollout(nds_batch_model(p->batch, 0), nds_batch_data(p->batch, 0), &c->ctrl, s, sp0,
-              best, c->M, c->T, &o);
+  if (p->seen_cost == out->cost && !memcmp(p->seen_x, best, sizeof(double) * p->dim))
+    o = p->seen_out;
+  else
+    nds_rollout(nds_batch_model(p->batch, 0), nds_batch_data(p->batch, 0), &c->ctrl, s, sp0,
+                best, c->M, c->T, &o);
   out->task_error = o.diverged ? INFINITY : nd_task_error(&c->w, goal, o.obj_xy, o.obj_yaw);
   out->predicted[0] = o.diverged ? s->obj_pos[0] : o.obj_xy[0];
   out->predicted[1] = o.diverged ? s->obj_pos[1] : o.obj_xy[1];

@@ -15,7 +15,9 @@
 #include "nd_stats.h"
 #include "nd_snap.h"
 #include "nds_fit.h"
+#include "nd_exec.h"
 #include "nds_planner.h"
+#include "nds_reach.h"
 #include "nds_setup.h"
 #include "nds_world.h"
 
@@ -315,7 +317,7 @@ int main(int argc, char **argv) {
   /* 2. Batched rollouts on 1 and 2 workers, against the raw rate. 3. Plan latency at the
    * paper's settings on every core, warm-started like the MPC, with and without free flight;
    * against brute force: N C rollouts of H / dt steps at the raw rate on every worker. */
-  double rate[3] = {0}, eff2 = 0, med[4] = {0}, p90[4] = {0}, brute_ms = 0;
+  double rate[3] = {0}, eff2 = 0, med[5] = {0}, p90[5] = {0}, brute_ms = 0;
   double *lat = malloc(sizeof(double) * reps);
   nd_pool *pool = su.pool;
   if (sections & SEC_PLAN) {
@@ -341,21 +343,40 @@ int main(int argc, char **argv) {
            eff2, rate[2] / (2.0 * rate[1]));
 
     /* N 128 C 4; N 50 C 2 without and with free flight; the live planner's N 20 C 2 with
-     * draws beyond the limits drawn again (pop, iters, free flight, redraws). */
-    const int settings[4][4] = {{128, 4, 1, 0}, {50, 2, 0, 0}, {50, 2, 1, 0}, {20, 2, 1, 8}};
-    for (int k = 0; k < 4; k++) {
+     * draws beyond the limits drawn again (pop, iters, free flight, redraws); the same on
+     * the lab world, as nudge-up sets it: the arm's reach ranked, its box and limits, 0.6 s
+     * segments (processes/supervisor/nudge-up). */
+    const int settings[5][4] = {{128, 4, 1, 0}, {50, 2, 0, 0}, {50, 2, 1, 0}, {20, 2, 1, 8},
+                                {20, 2, 1, 8}};
+    const double lab_lo[2] = {-0.15, -0.30}, lab_hi[2] = {0.15, 0.40};
+    nds_reach reach;
+    nds_panda_cfg ac;
+    nds_panda_cfg_default(&ac);
+    const double rm = ND_EXEC_WS_MARGIN + 0.01;
+    const double rlo[2] = {lab_lo[0] - rm, lab_lo[1] - rm}, rhi[2] = {lab_hi[0] + rm, lab_hi[1] + rm};
+    if (nds_reach_build(&reach, &ac, rlo, rhi, 0.02, err, sizeof(err))) {
+      fprintf(stderr, "nudge-bench: %s\n", err);
+      return 1;
+    }
+    for (int k = 0; k < 5; k++) {
       nds_planner_cfg cfg;
       nds_planner_cfg_default(&cfg);
       cfg.pop = settings[k][0];
       cfg.iters = settings[k][1];
       cfg.free_flight = settings[k][2];
       cfg.redraws = settings[k][3];
+      if (k == 4) {
+        cfg.T = 0.6, cfg.v_max = 0.45, cfg.a_max = 1.8, cfg.reach = &reach;
+        nds_planner_cfg_fit_limits(&cfg);
+        for (int a = 0; a < 2; a++) cfg.ws_lo[a] = lab_lo[a], cfg.ws_hi[a] = lab_hi[a];
+      }
       nds_planner *p = nds_planner_create(&nm, &cfg, pool, err, sizeof(err));
       if (!p) {
         fprintf(stderr, "nudge-bench: %s\n", err);
         return 1;
       }
-      const nd_goal goal = {.x = 0.2, .y = 0.05, .yaw = 0.3};
+      const nd_goal goal = k == 4 ? (nd_goal){.x = 0.1, .y = 0.1, .yaw = 0.3}
+                                  : (nd_goal){.x = 0.2, .y = 0.05, .yaw = 0.3};
       nds_plan plan;
       for (int r = 0; r < reps; r++) {
         double t = now_s();
@@ -364,12 +385,14 @@ int main(int argc, char **argv) {
       }
       med[k] = nd_quantile(lat, reps, 0.5);
       p90[k] = nd_quantile(lat, reps, 0.9);
-      printf("plan N %3d C %d, H 0.6 s, M 2, %d workers, free flight %s, redraws %d: median "
+      printf("plan%s N %3d C %d, H %.1f s, M 2, %d workers, free flight %s, redraws %d: median "
              "%.1f ms, p90 %.1f ms (%d candidates, %d simulated: the others beyond the "
-             "limits)\n", cfg.pop, cfg.iters, nd_pool_size(pool), cfg.free_flight ? "on" : "off",
-             cfg.redraws, med[k], p90[k], plan.evals, plan.rollouts);
+             "limits; %d redrawn)\n", k == 4 ? " (lab)" : "", cfg.pop, cfg.iters, 2 * cfg.T,
+             nd_pool_size(pool), cfg.free_flight ? "on" : "off", cfg.redraws, med[k], p90[k],
+             plan.evals, plan.rollouts, plan.redrawn);
       nds_planner_free(p);
     }
+    nds_reach_free(&reach);
     brute_ms = 1e3 * 50.0 * 2.0 * nsteps / (raw_rate * nd_pool_size(pool));
     printf("brute force N 50 C 2 (%d steps each at the raw rate on %d workers): %.1f ms; plan "
            "with free flight %.2f of it\n", nsteps, nd_pool_size(pool), brute_ms, med[2] / brute_ms);
@@ -600,6 +623,7 @@ int main(int argc, char **argv) {
     printf("plan_ff_speedup_n50_c2 %.2f ratio\n", med[1] / med[2]);
     printf("plan_brute_ratio_n50_c2 %.3f ratio\n", med[2] / brute_ms);
     printf("plan_ms_median_n20_c2_redraws %.1f ms\n", med[3]);
+    printf("plan_ms_median_lab_n20_c2 %.1f ms\n", med[4]);
   }
   printf("plan_dt %.4f s\n", plan_dt);
   if (sections & SEC_PREDICT) {

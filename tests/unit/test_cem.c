@@ -803,12 +803,17 @@ static void expect_invalid(const nd_cem_cfg *cfg, const char *word) {
 /* ---- redraws ---- */
 
 typedef struct {
-  int calls, seen, accepted;
+  int calls, seen, accepted, rounds;
 } redraw_ctx;
 
-static int redraw_accept(void *ctx, const double *x) {
-  ((redraw_ctx *)ctx)->calls++;
-  return x[0] >= 0.7;
+/* calls counts the candidates asked about, rounds the callbacks. */
+static void redraw_accept(void *ctx, const double *x, int n, int *ok) {
+  redraw_ctx *c = ctx;
+  c->rounds++;
+  for (int i = 0; i < n; i++) {
+    c->calls++;
+    ok[i] = x[(size_t)i * D8] >= 0.7;
+  }
 }
 
 static int redraw_cost(void *ctx, const double *x, int n, double *cost) {
@@ -830,20 +835,21 @@ static void test_redraw(void **state) {
   double m0[D8], s0[D8];
   fill(m0, D8, 0.0);
   fill(s0, D8, 1.0);
-  int accepted[2], seen[2], redrawn[2], calls[2];
+  int accepted[2], seen[2], redrawn[2], calls[2], rounds[2];
   for (int v = 0; v < 2; v++) {
     nd_cem_cfg cfg;
     nd_cem_cfg_default(&cfg, 1, D8, 400, 1);
     cfg.redraws = v ? 20 : 0;
     nd_cem *cem = nd_cem_create(&cfg, NULL, 0);
     assert_non_null(cem);
-    redraw_ctx c = {0, 0, 0};
+    redraw_ctx c = {0, 0, 0, 0};
     nd_cem_set_accept(cem, redraw_accept, &c);
     nd_cem_set_dist(cem, m0, s0);
     nd_rng r;
     nd_rng_seed(&r, 11, 0);
     assert_int_equal(nd_cem_run(cem, &r, redraw_cost, &c), 0);
     accepted[v] = c.accepted, seen[v] = c.seen, redrawn[v] = nd_cem_redrawn(cem), calls[v] = c.calls;
+    rounds[v] = c.rounds;
     nd_cem_free(cem);
   }
   assert_int_equal(seen[0], 400);
@@ -856,6 +862,9 @@ static void test_redraw(void **state) {
    * refusals' successor is not */
   assert_in_range(calls[1] - redrawn[1], 395, 400);
   assert_true(redrawn[1] > 2 * 300);  /* ~3 refusals per accepted candidate */
+  /* one callback per round over all candidates still refused, at most one per redraw */
+  assert_int_equal(rounds[0], 0);
+  assert_in_range(rounds[1], 10, 20);
 }
 
 static void test_invalid_cfg(void **state) {

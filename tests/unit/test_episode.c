@@ -112,11 +112,58 @@ static void test_redraws(void **state) {
   assert_true(out[1].over_limits * out[0].evals < out[0].over_limits * out[1].evals);
 }
 
+/* The limit checks and redraws run on the pool, so the plan is the same on 1 worker as on
+ * 2; and the prediction the plan reports is the rollout of its best keypoints, not of
+ * another candidate. */
+static void test_plan_pool_and_prediction(void **state) {
+  fixture *f = *state;
+  const nd_goal g = {.x = 0.10, .y = 0.10, .yaw = 0.5};
+  const double ee0[2] = {-0.10, 0.0};
+  nds_state s;
+  nds_state_rest(&f->world, 0.0, 0.0, 0.0, ee0, &s);
+  double sp0[2][4] = {{ee0[0], 0, 0, 0}, {ee0[1], 0, 0, 0}};
+  nds_planner_cfg cfg = *nds_planner_config(f->planner);
+  cfg.v_max = 0.45, cfg.a_max = 1.8, cfg.T = 0.6, cfg.pop = 20, cfg.iters = 2, cfg.redraws = 8;
+  nds_planner_cfg_fit_limits(&cfg);
+  char err[256];
+  nd_pool *one = nd_pool_create(1, err, sizeof(err));
+  assert_non_null(one);
+  nds_plan out[2][3];
+  for (int v = 0; v < 2; v++) {
+    nds_planner *p = nds_planner_create(&f->plan, &cfg, v ? f->pool : one, err, sizeof(err));
+    assert_non_null(p);
+    for (int k = 0; k < 3; k++)  /* cold, then warm-started */
+      assert_int_equal(nds_planner_plan(p, &s, (const double(*)[4])sp0, &g, &out[v][k], err, sizeof(err)), 0);
+    nds_planner_free(p);
+  }
+  nd_pool_free(one);
+  for (int k = 0; k < 3; k++) {
+    assert_memory_equal(out[0][k].keys, out[1][k].keys, sizeof(double) * 4 * cfg.M);
+    assert_true(out[0][k].cost == out[1][k].cost);
+    assert_int_equal(out[0][k].redrawn, out[1][k].redrawn);
+    assert_int_equal(out[0][k].over_limits, out[1][k].over_limits);
+    assert_int_equal(out[0][k].rollouts, out[1][k].rollouts);
+    assert_true(out[1][k].redrawn > 0 && out[1][k].cost < cfg.limit_penalty);
+
+    nds_rollout_out o;
+    mjData *d = mj_makeData(f->plan.m);
+    assert_non_null(d);
+    nds_rollout_ff(&f->plan, d, &cfg.ctrl, &s, (const double(*)[4])sp0, &out[1][k].keys[0][0],
+                   cfg.M, cfg.T, cfg.free_flight, &o);
+    mj_deleteData(d);
+    assert_int_equal(o.diverged, 0);
+    assert_true(o.obj_xy[0] == out[1][k].predicted[0] && o.obj_xy[1] == out[1][k].predicted[1]);
+    assert_true(o.obj_yaw == out[1][k].predicted[2]);
+    assert_true(nd_task_error(&cfg.w, &g, o.obj_xy, o.obj_yaw) == out[1][k].task_error);
+  }
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_reaches_goals),
       cmocka_unit_test(test_deterministic),
       cmocka_unit_test(test_redraws),
+      cmocka_unit_test(test_plan_pool_and_prediction),
   };
   return cmocka_run_group_tests(tests, setup, teardown);
 }
