@@ -11,8 +11,8 @@
  * a = 0.1, well inside; a 1 kg sphere sees a 5 Hz loop with damping ratio 0.32, the
  * feed-forward doing most of the tracking. ki is far below the continuous limit
  * kp kd / m (2e4) and, with i_max, adds at most 10 N to lean into a pushed object's
- * friction. Velocity mode: kv dt / m = 1 at 10 ms (stable below 2), a 10 ms time constant,
- * so a replay follows a recorded velocity closely (doc/decisions.md#velocity-replay). */
+ * friction. Velocity mode: kv dt / m = 1 at 10 ms (stable below 2), a 10 ms time constant;
+ * the replay sets kv for its own step instead (nds_replay_cfg_default). */
 void nds_ctrl_cfg_default(nds_ctrl_cfg *cfg) {
   cfg->kp = 1000.0;
   cfg->kd = 20.0;

@@ -21,6 +21,10 @@
 void nds_replay_cfg_default(nds_replay_cfg *cfg, int mode) {
   cfg->mode = mode;
   nds_ctrl_cfg_default(&cfg->ctrl);
+  /* A velocity replay follows the robot's recorded velocity without lag: a servo that
+   * lags under contact load lets the fit lower friction so the sphere keeps up
+   * (doc/decisions.md#replay-kv). */
+  cfg->ctrl.kv = 0;
   cfg->window = 0;
 }
 
@@ -219,7 +223,9 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
     return -1;
   }
   const mjModel *m = nm->m;
-  const nds_ctrl_cfg *ctrl = &cfg->ctrl;
+  nds_ctrl_cfg vc = cfg->ctrl;
+  if (!(vc.kv > 0)) vc.kv = NDS_CTRL_M_REF / m->opt.timestep;  /* kv dt / m = 1: one step */
+  const nds_ctrl_cfg *ctrl = &vc;
   const int qx = nm->ee_qpos[0], qy = nm->ee_qpos[1];
   const int T = r->n / k; /* a trailing partial model step is not replayed */
   const int dof0 = nm->ee_dof[0], dof1 = nm->ee_dof[1];

@@ -44,7 +44,9 @@ enum { NDS_REPLAY_FORCE = 0, NDS_REPLAY_VELOCITY = 1, NDS_REPLAY_SETPOINT = 2 };
 
 typedef struct {
   int mode;            /* NDS_REPLAY_* */
-  nds_ctrl_cfg ctrl;   /* the robot's controller: VELOCITY uses kv, SETPOINT the PID */
+  nds_ctrl_cfg ctrl;   /* the robot's controller: VELOCITY uses kv (0, the default: the
+                          sphere reaches the recorded velocity in one model step), SETPOINT
+                          the PID */
   double window;       /* s; > 0: re-anchor every window (below); 0: one shot from the
                           initial state, the paper's replay */
 } nds_replay_cfg;

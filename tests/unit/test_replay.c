@@ -412,11 +412,14 @@ static void test_replay_velocity(void **state) {
   nds_replay_terms t1, t2;
   char err[256];
   assert_int_equal(nds_replay(&nm, d, &rc, &r, &t1, pred, err, sizeof(err)), 0);
-  /* v_k = v (1 - (1 - a)^k), a = kv dt / m_ref (the gain scales with the mass m);
-   * x_N = x_0 + dt sum_{k=1..N} v_k. */
-  double a = rc.ctrl.kv * dt / 1.0, x = ee[0], vk = 0;
+  /* v_k += a (v - v_k), a = kv dt / m_ref (the gain scales with the mass m), 1 by
+   * default: the recorded velocity in one step, but for the force bound f_max (a step
+   * gains at most f_max dt / m_ref); x_N = x_0 + dt sum v_k. */
+  assert_true(rc.ctrl.kv == 0);
+  const double a = 1.0, dv_max = rc.ctrl.f_max * dt / 1.0;
+  double x = ee[0], vk = 0;
   for (int k = 0; k < n; k++) {
-    vk += a * (v - vk);
+    vk += fmin(a * (v - vk), dv_max);
     x += dt * vk;
   }
   printf("velocity_replay_final_x %.9f m (analytic %.9f), lag %.2e m\n", pred[5 * (n - 1) + 3],
