@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "nd_exec.h"
 #include "nd_math.h"
 
 int nds_reach_build(nds_reach *r, const nds_panda_cfg *cfg, const double lo[2],
@@ -76,6 +77,15 @@ int nds_reach_build(nds_reach *r, const nds_panda_cfg *cfg, const double lo[2],
       }
     }
   return 0;
+}
+
+int nds_reach_build_ws(nds_reach *r, const double ws_lo[2], const double ws_hi[2], char *err,
+                       int errlen) {
+  nds_panda_cfg ac;
+  nds_panda_cfg_default(&ac);
+  const double m = ND_EXEC_WS_MARGIN + 0.01;
+  const double lo[2] = {ws_lo[0] - m, ws_lo[1] - m}, hi[2] = {ws_hi[0] + m, ws_hi[1] + m};
+  return nds_reach_build(r, &ac, lo, hi, 0.02, err, errlen);
 }
 
 void nds_reach_free(nds_reach *r) {

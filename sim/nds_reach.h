@@ -28,6 +28,12 @@ int nds_reach_build(nds_reach *r, const nds_panda_cfg *cfg, const double lo[2],
                     const double hi[2], double step, char *err, int errlen);
 void nds_reach_free(nds_reach *r);
 
+/* The planner's map for the default arm: the keypoints' box ws_lo..ws_hi plus the room
+ * segments and brakes take beyond it (ND_EXEC_WS_MARGIN and 1 cm), at 2 cm. As
+ * nds_reach_build. */
+int nds_reach_build_ws(nds_reach *r, const double ws_lo[2], const double ws_hi[2], char *err,
+                       int errlen);
+
 /* The joints' rates qd and accelerations qdd moving the sphere at p with velocity v and
  * acceleration a (x, y), from the interpolated rates and their slopes (the
  * velocity-product terms included). Return 0, or -1 at an unreachable cell or outside the

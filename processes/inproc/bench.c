@@ -15,7 +15,6 @@
 #include "nd_stats.h"
 #include "nd_snap.h"
 #include "nds_fit.h"
-#include "nd_exec.h"
 #include "nds_planner.h"
 #include "nds_reach.h"
 #include "nds_setup.h"
@@ -348,13 +347,10 @@ int main(int argc, char **argv) {
      * segments (processes/supervisor/nudge-up). */
     const int settings[5][4] = {{128, 4, 1, 0}, {50, 2, 0, 0}, {50, 2, 1, 0}, {20, 2, 1, 8},
                                 {20, 2, 1, 8}};
-    const double lab_lo[2] = {-0.15, -0.30}, lab_hi[2] = {0.15, 0.40};
+    const double lab_lo[2] = {NDS_PANDA_WS_XMIN, NDS_PANDA_WS_YMIN},
+                 lab_hi[2] = {NDS_PANDA_WS_XMAX, NDS_PANDA_WS_YMAX};
     nds_reach reach;
-    nds_panda_cfg ac;
-    nds_panda_cfg_default(&ac);
-    const double rm = ND_EXEC_WS_MARGIN + 0.01;
-    const double rlo[2] = {lab_lo[0] - rm, lab_lo[1] - rm}, rhi[2] = {lab_hi[0] + rm, lab_hi[1] + rm};
-    if (nds_reach_build(&reach, &ac, rlo, rhi, 0.02, err, sizeof(err))) {
+    if (nds_reach_build_ws(&reach, lab_lo, lab_hi, err, sizeof(err))) {
       fprintf(stderr, "nudge-bench: %s\n", err);
       return 1;
     }

@@ -7,7 +7,6 @@
 #include <sys/syscall.h>
 #include <unistd.h>
 
-#include "nd_exec.h"
 #include "nd_opt.h"
 #include "planner.h"
 
@@ -108,12 +107,7 @@ int main(int argc, char **argv) {
   nds_planner_cfg_fit_limits(&pc);
   for (int k = 0; k < 2; k++) pc.ws_lo[k] = o.ws.lo[k], pc.ws_hi[k] = o.ws.hi[k];
   if (arm) {
-    /* The keypoints' box plus the room segments and brakes take beyond it. */
-    nds_panda_cfg ac;
-    nds_panda_cfg_default(&ac);
-    const double m = ND_EXEC_WS_MARGIN + 0.01;
-    const double lo[2] = {pc.ws_lo[0] - m, pc.ws_lo[1] - m}, hi[2] = {pc.ws_hi[0] + m, pc.ws_hi[1] + m};
-    if (nds_reach_build(&reach, &ac, lo, hi, 0.02, err, sizeof(err))) goto done;
+    if (nds_reach_build_ws(&reach, pc.ws_lo, pc.ws_hi, err, sizeof(err))) goto done;
     pc.reach = &reach;
   }
   /* LCM first: its receive thread keeps the process's priority. Then the planning threads

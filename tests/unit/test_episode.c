@@ -3,6 +3,7 @@
 #include "nd_test.h"
 
 #include <stdlib.h>
+#include <string.h>
 
 #include "nds_episode.h"
 #include "nds_tfx.h"
@@ -76,6 +77,17 @@ static void test_deterministic(void **state) {
   assert_int_equal(o[0].plans, o[1].plans);
 }
 
+/* A planner task at the lab's limits (0.45 m/s, 1.8 m/s^2, 0.6 s segments, N 20, C 2): the
+ * object at rest at the origin, the sphere and its setpoint 10 cm behind it. */
+static void lab_start(const fixture *f, nds_state *s, double sp0[2][4], nds_planner_cfg *cfg) {
+  const double ee0[2] = {-0.10, 0.0};
+  nds_state_rest(&f->world, 0.0, 0.0, 0.0, ee0, s);
+  memset(sp0, 0, 8 * sizeof(double));
+  sp0[0][0] = ee0[0], sp0[1][0] = ee0[1];
+  *cfg = *nds_planner_config(f->planner);
+  cfg->v_max = 0.45, cfg->a_max = 1.8, cfg->T = 0.6, cfg->pop = 20, cfg->iters = 2;
+}
+
 /* At the lab's limits (0.45 m/s, 1.8 m/s^2, 0.6 s segments) most draws from a cold start
  * break them. Redrawing those makes more of the population worth simulating: more
  * rollouts and a smaller share of penalised candidates per plan, and no redraw at all
@@ -83,19 +95,13 @@ static void test_deterministic(void **state) {
 static void test_redraws(void **state) {
   fixture *f = *state;
   const nd_goal g = {.x = 0.10, .y = 0.10, .yaw = 0.5};
-  const double ee0[2] = {-0.10, 0.0};
   nds_state s;
-  nds_state_rest(&f->world, 0.0, 0.0, 0.0, ee0, &s);
-  double sp0[2][4] = {{ee0[0], 0, 0, 0}, {ee0[1], 0, 0, 0}};
+  double sp0[2][4];
   nds_plan out[2];
   char err[256];
   for (int v = 0; v < 2; v++) {
-    nds_planner_cfg cfg = *nds_planner_config(f->planner);
-    cfg.v_max = 0.45;
-    cfg.a_max = 1.8;
-    cfg.T = 0.6;
-    cfg.pop = 20;
-    cfg.iters = 2;
+    nds_planner_cfg cfg;
+    lab_start(f, &s, sp0, &cfg);
     cfg.redraws = v ? 8 : 0;
     nds_planner_cfg_fit_limits(&cfg);
     nds_planner *p = nds_planner_create(&f->plan, &cfg, f->pool, err, sizeof(err));
@@ -118,12 +124,11 @@ static void test_redraws(void **state) {
 static void test_plan_pool_and_prediction(void **state) {
   fixture *f = *state;
   const nd_goal g = {.x = 0.10, .y = 0.10, .yaw = 0.5};
-  const double ee0[2] = {-0.10, 0.0};
   nds_state s;
-  nds_state_rest(&f->world, 0.0, 0.0, 0.0, ee0, &s);
-  double sp0[2][4] = {{ee0[0], 0, 0, 0}, {ee0[1], 0, 0, 0}};
-  nds_planner_cfg cfg = *nds_planner_config(f->planner);
-  cfg.v_max = 0.45, cfg.a_max = 1.8, cfg.T = 0.6, cfg.pop = 20, cfg.iters = 2, cfg.redraws = 8;
+  double sp0[2][4];
+  nds_planner_cfg cfg;
+  lab_start(f, &s, sp0, &cfg);
+  cfg.redraws = 8;
   nds_planner_cfg_fit_limits(&cfg);
   char err[256];
   nd_pool *one = nd_pool_create(1, err, sizeof(err));
