@@ -65,7 +65,8 @@ typedef struct {
   nd_mailbox stats;     /* loop thread -> anyone */
   nd_jitter jit;        /* loop thread only */
   nd_rtloop_stats st;   /* loop thread only; posted copies in stats */
-  int64_t wall_off_ns;  /* loop thread only: wall clock less monotonic clock */
+  int64_t wall_off_ns;  /* loop thread only: wall clock less monotonic clock, as stamped
+                           (nd_rtloop_slew) */
 } nd_rtloop;
 
 /* Lock memory (if asked), start the loop thread on cfg (SCHED_FIFO if allowed, else normal
@@ -84,6 +85,20 @@ int nd_rtloop_stats_take(nd_rtloop *l, uint64_t *version, nd_rtloop_stats *out);
  * deadline not yet served: the cycles due, then *next_ns past them. The thread's body,
  * exposed so a test can drive the policies on synthetic time. */
 void nd_rtloop_wake(nd_rtloop *l, int64_t *next_ns, int64_t now_ns, int64_t utime_now);
+
+/* How the stamps follow the wall clock. Each loop measures the wall clock's offset from
+ * the monotonic clock once a second, each at its own instant. A change of the offset
+ * (an NTP step, a virtual machine's clock corrected after a pause) below
+ * ND_RTLOOP_STEP_NS is slewed in at ND_RTLOOP_SLEW_PPM, so two loops never disagree by a
+ * step: a 5 ms step taken at once made the robot's setpoint, sampled from the executor's
+ * stamped commands, jump by v times 5 ms (doc/decisions.md#clock-slew). A larger one is
+ * taken at once (a commander that far off is held as late). */
+#define ND_RTLOOP_SLEW_PPM 500
+#define ND_RTLOOP_STEP_NS 20000000
+
+/* The offset one wake-up on: off moved toward target by at most slew_ns, or target if
+ * they differ by ND_RTLOOP_STEP_NS or more. */
+int64_t nd_rtloop_slew(int64_t off, int64_t target, int64_t slew_ns);
 
 /* 1 when this is an AddressSanitizer build: its runtime ignores mlockall (and locking its
  * shadow memory could not work), so callers say memory is not locked. */
