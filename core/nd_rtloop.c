@@ -64,8 +64,8 @@ static int64_t wall_offset_ns(void) {
   return off;
 }
 
-int64_t nd_rtloop_slew(int64_t off, int64_t target, int64_t slew_ns) {
-  const int64_t d = target - off;
+int64_t nd_rtloop_slew(int64_t off, int64_t target, int64_t period_ns) {
+  const int64_t d = target - off, slew_ns = period_ns * ND_RTLOOP_SLEW_PPM / 1000000;
   if (d >= ND_RTLOOP_STEP_NS || d <= -ND_RTLOOP_STEP_NS) return target;
   if (d > slew_ns) return off + slew_ns;
   if (d < -slew_ns) return off - slew_ns;
@@ -110,14 +110,13 @@ void nd_rtloop_wake(nd_rtloop *l, int64_t *next_ns, int64_t now_ns, int64_t utim
 static void *loop_main(void *arg) {
   nd_rtloop *l = arg;
   const int64_t period = (int64_t)llround(1e9 / l->cfg.rate);
-  const int64_t slew = period * ND_RTLOOP_SLEW_PPM / 1000000;
   int64_t next = mono_ns() + period, target = wall_offset_ns();
   int64_t resync = next + 1000000000;
   l->wall_off_ns = target;
   while (!atomic_load_explicit(&l->stop, memory_order_relaxed)) {
     /* The clocks' offset, again once a second: the wall clock may be slewed or stepped. */
     if (next >= resync) target = wall_offset_ns(), resync = next + 1000000000;
-    l->wall_off_ns = nd_rtloop_slew(l->wall_off_ns, target, slew);
+    l->wall_off_ns = nd_rtloop_slew(l->wall_off_ns, target, period);
     const struct timespec dl = {(time_t)(next / 1000000000), (long)(next % 1000000000)};
     while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &dl, NULL) == EINTR) {
     }

@@ -90,15 +90,15 @@ void nd_rtloop_wake(nd_rtloop *l, int64_t *next_ns, int64_t now_ns, int64_t utim
  * the monotonic clock once a second, each at its own instant. A change of the offset
  * (an NTP step, a virtual machine's clock corrected after a pause) below
  * ND_RTLOOP_STEP_NS is slewed in at ND_RTLOOP_SLEW_PPM, so two loops never disagree by a
- * step: a 5 ms step taken at once made the robot's setpoint, sampled from the executor's
- * stamped commands, jump by v times 5 ms (doc/decisions.md#clock-slew). A larger one is
- * taken at once (a commander that far off is held as late). */
+ * step: the robot samples the executor's commands at its stamp less theirs, and a step
+ * of d between them moves its setpoint by v d in one cycle (doc/decisions.md#clock-slew).
+ * A larger change is taken at once (a commander that far off is held as late). */
 #define ND_RTLOOP_SLEW_PPM 500
 #define ND_RTLOOP_STEP_NS 20000000
 
-/* The offset one wake-up on: off moved toward target by at most slew_ns, or target if
- * they differ by ND_RTLOOP_STEP_NS or more. */
-int64_t nd_rtloop_slew(int64_t off, int64_t target, int64_t slew_ns);
+/* The offset one wake-up of period_ns on: off moved toward target by at most
+ * ND_RTLOOP_SLEW_PPM of period_ns, or target if they differ by ND_RTLOOP_STEP_NS or more. */
+int64_t nd_rtloop_slew(int64_t off, int64_t target, int64_t period_ns);
 
 /* 1 when this is an AddressSanitizer build: its runtime ignores mlockall (and locking its
  * shadow memory could not work), so callers say memory is not locked. */
