@@ -127,6 +127,8 @@ int nds_fit_cfg_check(const nds_fit_cfg *c, char *err, int errlen) {
     bad = "replay.mode must be NDS_REPLAY_FORCE, _VELOCITY or _SETPOINT";
   else if (!(isfinite(c->replay.window) && c->replay.window >= 0))
     bad = "replay.window must be finite and >= 0";
+  else if (!(isfinite(c->replay.smooth) && c->replay.smooth >= 0 && c->replay.smooth <= 1))
+    bad = "replay.smooth must be in [0, 1] s";
   if (bad) {
     snprintf(err, errlen, "fit: %s", bad);
     return -1;

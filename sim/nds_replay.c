@@ -26,6 +26,7 @@ void nds_replay_cfg_default(nds_replay_cfg *cfg, int mode) {
    * (doc/decisions.md#replay-kv). */
   cfg->ctrl.kv = 0;
   cfg->window = 0;
+  cfg->smooth = 0;
 }
 
 const char *nds_replay_mode_name(int mode) {
@@ -167,20 +168,56 @@ static void rec_obs(const nd_rollout *r, int i, double obj[ND_ROLLOUT_OBJ], doub
  * in nds_replay.h. MuJoCo's Euler step moves qpos by the new qvel times the step, so the
  * rates are the difference of two observations over the record's step: exact for a record
  * taken at the model's step, the mean rate over its last record step otherwise. */
-static void reanchor(const nds_model *nm, mjData *d, const nd_rollout *r, int i) {
+/* The object's pose q (7) and rates v (6) at observation i as a straight-line fit over the
+ * observations within +-h of it, each axis in time; the orientation's six as rotation
+ * vectors from observation i's (body frame, as mju_subQuat and a free joint's rates). */
+static void anchor_fit(const nd_rollout *r, int i, int h, mjtNum q[7], mjtNum v[6]) {
+  const int j0 = i - h < 0 ? 0 : i - h, j1 = i + h >= r->n ? r->n - 1 : i + h;
+  double qi[4], st = 0, stt = 0, sy[6] = {0}, sty[6] = {0};
+  memcpy(qi, nd_rollout_obj(r, i) + 3, sizeof(qi));
+  mju_normalize4(qi);
+  for (int j = j0; j <= j1; j++) {
+    const double *o = nd_rollout_obj(r, j), t = (j - i) * r->dt;
+    double y[6], qj[4];
+    memcpy(y, o, 3 * sizeof(double));
+    memcpy(qj, o + 3, sizeof(qj));
+    mju_normalize4(qj);
+    mju_subQuat(y + 3, qj, qi);
+    st += t;
+    stt += t * t;
+    for (int a = 0; a < 6; a++) sy[a] += y[a], sty[a] += t * y[a];
+  }
+  const double n = j1 - j0 + 1, den = n * stt - st * st;
+  double y0[6];
+  for (int a = 0; a < 6; a++) {
+    v[a] = den > 0 ? (n * sty[a] - st * sy[a]) / den : 0;
+    y0[a] = (sy[a] - v[a] * st) / n;
+  }
+  mju_copy(q, y0, 3);
+  mju_copy4(q + 3, qi);
+  mju_quatIntegrate(q + 3, y0 + 3, 1);
+}
+
+static void reanchor(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
+                     const nd_rollout *r, int i) {
   const mjModel *m = nm->m;
   double o1[ND_ROLLOUT_OBJ], e1[2], o0[ND_ROLLOUT_OBJ], e0[2];
   rec_obs(r, i, o1, e1);
   rec_obs(r, i - 1, o0, e0);
   const double rdt = 1 / r->dt;
   mjtNum *q = d->qpos + nm->obj_qpos, *v = d->qvel + nm->obj_dof;
-  mju_copy(q, o1, ND_ROLLOUT_OBJ);
-  mju_normalize4(q + 3);
-  mju_normalize4(o0 + 3);
-  for (int a = 0; a < 3; a++) v[a] = (o1[a] - o0[a]) * rdt;
-  /* A free joint's angular velocity is in the body frame, as mju_subQuat's difference. */
-  mju_subQuat(v + 3, q + 3, o0 + 3);
-  mju_scl3(v + 3, v + 3, rdt);
+  const int h = (int)lround(cfg->smooth / r->dt);
+  if (h > 0) {
+    anchor_fit(r, i, h, q, v);
+  } else {
+    mju_copy(q, o1, ND_ROLLOUT_OBJ);
+    mju_normalize4(q + 3);
+    mju_normalize4(o0 + 3);
+    for (int a = 0; a < 3; a++) v[a] = (o1[a] - o0[a]) * rdt;
+    /* A free joint's angular velocity is in the body frame, as mju_subQuat's difference. */
+    mju_subQuat(v + 3, q + 3, o0 + 3);
+    mju_scl3(v + 3, v + 3, rdt);
+  }
   for (int a = 0; a < 2; a++) {
     d->qpos[nm->ee_qpos[a]] = e1[a] - m->body_pos[3 * nm->ee_body + a] + m->qpos0[nm->ee_qpos[a]];
     d->qvel[nm->ee_dof[a]] = (e1[a] - e0[a]) * rdt;
@@ -208,6 +245,10 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
   const int mode = cfg->mode;
   if (mode != NDS_REPLAY_FORCE && mode != NDS_REPLAY_VELOCITY && mode != NDS_REPLAY_SETPOINT) {
     snprintf(err, errlen, "replay: unknown replay mode %d", mode);
+    return -1;
+  }
+  if (!(isfinite(cfg->smooth) && cfg->smooth >= 0 && cfg->smooth <= 1)) {
+    snprintf(err, errlen, "replay: smooth = %g s, must be in [0, 1]", cfg->smooth);
     return -1;
   }
   if (!(isfinite(cfg->window) && cfg->window >= 0)) {
@@ -255,7 +296,7 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
   double rs = 0, ws = 0, wcap = robust > 0 ? wlen * robust * expm1(limit) : 0;
   for (; j < T && !diverged && !cut; j++) {
     const int base = j * k;
-    if (W && j > 0 && j % W == 0) reanchor(nm, d, r, base - 1);
+    if (W && j > 0 && j % W == 0) reanchor(nm, d, cfg, r, base - 1);
     const double vel[2] = {d->qvel[dof0], d->qvel[dof1]};
     double f[2];
     if (mode == NDS_REPLAY_SETPOINT) {

@@ -49,6 +49,8 @@ typedef struct {
                           the PID */
   double window;       /* s; > 0: re-anchor every window (below); 0: one shot from the
                           initial state, the paper's replay */
+  double smooth;       /* s; > 0: re-anchor the object on a local fit of its observations
+                          within +-smooth (below); 0: on the observation itself */
 } nds_replay_cfg;
 
 /* Re-anchoring (multiple shooting). With window > 0, every window seconds of model time
@@ -64,7 +66,13 @@ typedef struct {
  * depends chaotically on theta, so a replay that kept its own height and tilt started
  * each window from a different hop and its loss was white noise within ~2 % of the truth
  * (doc/decisions.md#box-lift). At the recording theta the replay stays exact up to
- * rounding. */
+ * rounding.
+ * With smooth > 0 the object's anchor is a straight-line least-squares fit, in time, of
+ * its observations within +-smooth seconds (positions, and the orientations as rotation
+ * vectors from the anchored one): the fit's value is the pose, its slope the rates. Motion
+ * capture frames carry noise (the lab's 2e-3 rad a frame is ~0.7 rad/s as a backward
+ * difference over one frame); a fit over n frames divides it by about n^1.5. Exact
+ * records need none: it would only blur them (doc/decisions.md#anchor-fit). */
 
 /* mode with the default controller (nds_ctrl_cfg_default), no re-anchoring. */
 void nds_replay_cfg_default(nds_replay_cfg *cfg, int mode);
