@@ -164,18 +164,13 @@ static void rec_obs(const nd_rollout *r, int i, double obj[ND_ROLLOUT_OBJ], doub
   memcpy(ee, r->ee + 2 * i, 2 * sizeof(double));
 }
 
-/* Put observation i of r, and its rates from observation i - 1, into d: see re-anchoring
- * in nds_replay.h. MuJoCo's Euler step moves qpos by the new qvel times the step, so the
- * rates are the difference of two observations over the record's step: exact for a record
- * taken at the model's step, the mean rate over its last record step otherwise. */
-/* The object's pose q (7) and rates v (6) at observation i as a straight-line fit over the
- * observations within +-h of it, each axis in time; the orientation's six as rotation
- * vectors from observation i's (body frame, as mju_subQuat and a free joint's rates). */
-static void anchor_fit(const nd_rollout *r, int i, int h, mjtNum q[7], mjtNum v[6]) {
-  const int j0 = i - h < 0 ? 0 : i - h, j1 = i + h >= r->n ? r->n - 1 : i + h;
-  double qi[4], st = 0, stt = 0, sy[6] = {0}, sty[6] = {0};
-  memcpy(qi, nd_rollout_obj(r, i) + 3, sizeof(qi));
-  mju_normalize4(qi);
+/* A straight-line fit in time of the object's observations j0..j1 about observation i:
+ * value y0 and slope v per axis (positions; orientations as rotation vectors from qi,
+ * body frame, as mju_subQuat and a free joint's rates). Returns the mean squared residual
+ * of x and y. */
+static double line_fit(const nd_rollout *r, int i, int j0, int j1, const double qi[4],
+                       double y0[6], double v[6]) {
+  double st = 0, stt = 0, sy[6] = {0}, sty[6] = {0}, syy = 0;
   for (int j = j0; j <= j1; j++) {
     const double *o = nd_rollout_obj(r, j), t = (j - i) * r->dt;
     double y[6], qj[4];
@@ -186,18 +181,53 @@ static void anchor_fit(const nd_rollout *r, int i, int h, mjtNum q[7], mjtNum v[
     st += t;
     stt += t * t;
     for (int a = 0; a < 6; a++) sy[a] += y[a], sty[a] += t * y[a];
+    syy += y[0] * y[0] + y[1] * y[1];
   }
   const double n = j1 - j0 + 1, den = n * stt - st * st;
-  double y0[6];
+  double rss = syy;
   for (int a = 0; a < 6; a++) {
     v[a] = den > 0 ? (n * sty[a] - st * sy[a]) / den : 0;
     y0[a] = (sy[a] - v[a] * st) / n;
+    if (a < 2) rss -= y0[a] * sy[a] + v[a] * sty[a];
+  }
+  return rss / n;
+}
+
+/* The object's pose q (7) and rates v (6) at observation i: of the line fits over the
+ * observations within +-h, before i and after i, the one closest to its points. Near a
+ * push's start or stop only one side is a line; elsewhere the centred fit is the least
+ * noisy and the others differ from it by noise. */
+static void anchor_fit(const nd_rollout *r, int i, int h, mjtNum q[7], mjtNum v[6]) {
+  const int lo = i - h < 0 ? 0 : i - h, hi = i + h >= r->n ? r->n - 1 : i + h;
+  const int span[3][2] = {{lo, hi}, {lo, i}, {i, hi}};
+  double qi[4], y0[6], best = INFINITY;
+  memcpy(qi, nd_rollout_obj(r, i) + 3, sizeof(qi));
+  mju_normalize4(qi);
+  for (int k = 0; k < 3; k++) {
+    if (span[k][1] - span[k][0] < 2) continue;
+    double y[6], w[6];
+    const double e = line_fit(r, i, span[k][0], span[k][1], qi, y, w);
+    if (k == 0 || e < best) {
+      best = e;
+      memcpy(y0, y, sizeof(y0));
+      for (int a = 0; a < 6; a++) v[a] = w[a];
+    }
+  }
+  if (!(best < INFINITY)) {  /* a record of two steps: the observation itself */
+    memset(y0, 0, sizeof(y0));
+    memcpy(y0, nd_rollout_obj(r, i), 3 * sizeof(double));
+    for (int a = 0; a < 6; a++) v[a] = 0;
   }
   mju_copy(q, y0, 3);
   mju_copy4(q + 3, qi);
   mju_quatIntegrate(q + 3, y0 + 3, 1);
 }
 
+/* Put observation i of r, and its rates from observation i - 1, into d: see re-anchoring
+ * in nds_replay.h. MuJoCo's Euler step moves qpos by the new qvel times the step, so the
+ * rates are the difference of two observations over the record's step: exact for a record
+ * taken at the model's step, the mean rate over its last record step otherwise. With
+ * cfg->smooth the object's come from anchor_fit instead. */
 static void reanchor(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
                      const nd_rollout *r, int i) {
   const mjModel *m = nm->m;

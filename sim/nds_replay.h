@@ -50,7 +50,7 @@ typedef struct {
   double window;       /* s; > 0: re-anchor every window (below); 0: one shot from the
                           initial state, the paper's replay */
   double smooth;       /* s; > 0: re-anchor the object on a local fit of its observations
-                          within +-smooth (below); 0: on the observation itself */
+                          within smooth of the anchor (below); 0: on the observation */
 } nds_replay_cfg;
 
 /* Re-anchoring (multiple shooting). With window > 0, every window seconds of model time
@@ -68,9 +68,11 @@ typedef struct {
  * (doc/decisions.md#box-lift). At the recording theta the replay stays exact up to
  * rounding.
  * With smooth > 0 the object's anchor is a straight-line least-squares fit, in time, of
- * its observations within +-smooth seconds (positions, and the orientations as rotation
- * vectors from the anchored one): the fit's value is the pose, its slope the rates. Motion
- * capture frames carry noise (the lab's 2e-3 rad a frame is ~0.7 rad/s as a backward
+ * its observations within smooth seconds (positions, and the orientations as rotation
+ * vectors from the anchored one): the fit's value is the pose, its slope the rates. Of the
+ * fits over +-smooth, the smooth before and the smooth after, the one whose x and y lie
+ * closest to it is taken, so a push's start or stop is not smeared across the anchor.
+ * Motion capture frames carry noise (the lab's 2e-3 rad a frame is ~0.7 rad/s as a
  * difference over one frame); a fit over n frames divides it by about n^1.5. Exact
  * records need none: it would only blur them (doc/decisions.md#anchor-fit). */
 

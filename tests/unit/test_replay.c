@@ -473,8 +473,8 @@ static void mocap_frames(const nd_rollout *src, nd_rng *g, nd_rollout *r) {
 
 /* Re-anchored every 0.1 s on motion capture's noisy frames, a replay under the truth
  * starts each window with the noise's rates (2e-3 rad over a 4 ms frame is ~0.7 rad/s of
- * spin and tumble); anchored on a straight-line fit over +-20 ms it strays far less from
- * the same noisy targets. */
+ * spin and tumble); anchored on straight-line fits over 20 ms it strays far less from the
+ * same noisy targets. */
 static void test_replay_anchor_fit(void **state) {
   (void)state;
   nds_model nm;
