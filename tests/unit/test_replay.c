@@ -516,6 +516,48 @@ static void test_replay_anchor_fit(void **state) {
   nds_model_free(&nm);
 }
 
+/* An anchor 5 ms before the box stops: the line centred on it would take in the 15 ms
+ * of standing still after the stop and start the box too slow; the fit over the 20 ms
+ * before is a line and is taken, so the box leaves the anchor at the observed 0.1 m/s
+ * (less one step of table friction, mu g dt ~ 0.01 m/s). */
+static void test_replay_anchor_stop(void **state) {
+  (void)state;
+  const double v = 0.1, dt = 0.001;
+  enum { N = 200, STOP = 65, ANCHOR = 59 };
+  nd_rollout r;
+  rec_alloc(&r, N, dt, ND_CTRL_FORCE);
+  nds_model nm;
+  nds_test_build(&nm, dt, NULL);
+  nds_state s0;
+  const double ee[2] = {-0.3, 0.2};
+  nds_state_rest(&nm, 0, 0, 0, ee, &s0);
+  nds_replay_start_put(&r, &s0);
+  for (int k = 0; k < N; k++) {
+    double *o = nd_rollout_obj(&r, k);
+    memcpy(o, s0.obj_pos, 3 * sizeof(double));
+    memcpy(o + 3, s0.obj_quat, 4 * sizeof(double));
+    o[0] += v * dt * ((k < STOP ? k : STOP - 1) + 1);
+    r.ee[2 * k] = ee[0], r.ee[2 * k + 1] = ee[1];
+    nds_replay_sp_put(r.sp + 6 * k, (const double[2][4]){{ee[0], 0, 0, 0}, {ee[1], 0, 0, 0}});
+  }
+  mjData *d = mj_makeData(nm.m);
+  nds_replay_cfg rc;
+  nds_replay_cfg_default(&rc, NDS_REPLAY_FORCE);
+  rc.window = (ANCHOR + 1) * dt;
+  rc.smooth = 0.02;
+  double *pred = malloc(sizeof(double) * NDS_REPLAY_PRED_COLS * N);
+  nds_replay_terms t;
+  char err[256];
+  assert_int_equal(nds_replay(&nm, d, &rc, &r, &t, pred, err, sizeof(err)), 0);
+  const double step = pred[NDS_REPLAY_PRED_COLS * (ANCHOR + 1)] - nd_rollout_obj(&r, ANCHOR)[0];
+  printf("anchor_stop_first_step %.4f mm (observed %.4f mm)\n", 1e3 * step, 1e3 * v * dt);
+  assert_true(step > 0.85 * v * dt && step < 1.001 * v * dt);
+  free(pred);
+  rec_free(&r);
+  mj_deleteData(d);
+  nds_model_free(&nm);
+}
+
 /* Records that cannot be replayed are refused with a message; a NaN inside a record that
  * skipped the check replays as diverged: large finite terms, NaN rows, no MuJoCo print. */
 static void test_replay_bad_records(void **state) {
@@ -1125,6 +1167,7 @@ int main(void) {
       cmocka_unit_test(test_replay_ratio),
       cmocka_unit_test(test_replay_velocity),
       cmocka_unit_test(test_replay_anchor_fit),
+      cmocka_unit_test(test_replay_anchor_stop),
       cmocka_unit_test(test_replay_bad_records),
       cmocka_unit_test(test_torsion_landscape),
       cmocka_unit_test(test_fit_recovers_sliding),
