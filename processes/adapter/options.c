@@ -66,7 +66,7 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
        .help = "re-anchor the object on a straight-line fit of its observations within S s "
                "(of the fits around, before and after the anchor the closest), which averages "
                "motion capture's noise out of the anchors' rates (0: on the observation and a "
-               "one-step difference, exact for noiseless records; nudge-up --world lab: 0.02)"},
+               "one-step difference, exact for noiseless records)"},
       {"robust", ND_OPT_DOUBLE, &o->robust, 0, 1, .arg = "S",
        .help = "rank candidates by the replay windows' robust score of scale S m^2 (0: by L, "
                "the paper's)"},
