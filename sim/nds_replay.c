@@ -207,16 +207,16 @@ static void anchor_fit(const nd_rollout *r, int i, int h, mjtNum q[7], mjtNum v[
     if (span[k][1] - span[k][0] < 2) continue;
     double y[6], w[6];
     const double e = line_fit(r, i, span[k][0], span[k][1], qi, y, w);
-    if (k == 0 || e < best) {
+    if (e < best) {
       best = e;
       memcpy(y0, y, sizeof(y0));
-      for (int a = 0; a < 6; a++) v[a] = w[a];
+      memcpy(v, w, sizeof(w));
     }
   }
-  if (!(best < INFINITY)) {  /* a record of two steps: the observation itself */
+  if (!(best < INFINITY)) {  /* fewer than three observations: the observation, at rest */
     memset(y0, 0, sizeof(y0));
     memcpy(y0, nd_rollout_obj(r, i), 3 * sizeof(double));
-    for (int a = 0; a < 6; a++) v[a] = 0;
+    memset(v, 0, 6 * sizeof(mjtNum));
   }
   mju_copy(q, y0, 3);
   mju_copy4(q + 3, qi);

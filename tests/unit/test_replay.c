@@ -383,6 +383,20 @@ static void test_replay_ratio(void **state) {
   nds_model_free(&m2);
 }
 
+/* A record of n steps at nm's timestep: the box at rest at the origin, the sphere held at
+ * ee; *s0 its start state. */
+static void rest_record(const nds_model *nm, int n, int control, const double ee[2],
+                        nd_rollout *r, nds_state *s0) {
+  rec_alloc(r, n, nm->m->opt.timestep, control);
+  nds_state_rest(nm, 0, 0, 0, ee, s0);
+  nds_replay_start_put(r, s0);
+  for (int k = 0; k < n; k++) {
+    memcpy(nd_rollout_obj(r, k), s0->obj_pos, 3 * sizeof(double));
+    memcpy(nd_rollout_obj(r, k) + 3, s0->obj_quat, 4 * sizeof(double));
+    memcpy(r->ee + 2 * k, ee, 2 * sizeof(double));
+  }
+}
+
 /* Velocity mode: the sphere tracks the recorded velocity through nds_ctrl_vel. Free of
  * contact, a constant reference v gives the first-order lag of the discrete loop, which
  * the model reproduces to rounding; a heavier sphere lags more, so velocity replays see
@@ -391,20 +405,15 @@ static void test_replay_velocity(void **state) {
   (void)state;
   const double v = 0.1, dt = 0.001;
   const int n = 500;
-  nd_rollout r;
-  rec_alloc(&r, n, dt, ND_CTRL_VELOCITY);
   nds_model nm;
   nds_test_build(&nm, dt, NULL);
+  nd_rollout r;
   nds_state s0;
   const double ee[2] = {-0.3, 0.2};
-  nds_state_rest(&nm, 0, 0, 0, ee, &s0);
-  nds_replay_start_put(&r, &s0);
+  rest_record(&nm, n, ND_CTRL_VELOCITY, ee, &r, &s0);
   for (int k = 0; k < n; k++) {
     r.u[2 * k] = v;
     r.ee[2 * k] = ee[0] + v * dt * (k + 1);  /* a perfectly tracking robot */
-    r.ee[2 * k + 1] = ee[1];
-    memcpy(nd_rollout_obj(&r, k), s0.obj_pos, 3 * sizeof(double)); /* the box at rest */
-    memcpy(nd_rollout_obj(&r, k) + 3, s0.obj_quat, 4 * sizeof(double));
   }
   mjData *d = mj_makeData(nm.m);
   nds_replay_cfg rc;
@@ -442,7 +451,8 @@ static void test_replay_velocity(void **state) {
 }
 
 /* r's object as motion capture would give it: frames at 240 Hz of src's poses with the
- * lab's noise (0.1 mm and 2e-3 rad per axis), interpolated to each step (nlerp). */
+ * lab's noise (0.1 mm and 2e-3 rad per axis), interpolated to each step as nd_recorder
+ * does (positions linearly, orientations by nd_quat_nlerp). */
 static void mocap_frames(const nd_rollout *src, nd_rng *g, nd_rollout *r) {
   const double fdt = 1.0 / 240;
   const int nf = (int)((src->n + 1) * src->dt / fdt) + 2;
@@ -465,8 +475,8 @@ static void mocap_frames(const nd_rollout *src, nd_rng *g, nd_rollout *r) {
     const int f = (int)t;
     const double w = t - f;
     double *o = nd_rollout_obj(r, k);
-    for (int a = 0; a < 7; a++) o[a] = (1 - w) * fr[f][a] + w * fr[f + 1][a];
-    mju_normalize4(o + 3);
+    for (int a = 0; a < 3; a++) o[a] = (1 - w) * fr[f][a] + w * fr[f + 1][a];
+    nd_quat_nlerp(fr[f] + 3, fr[f + 1] + 3, w, o + 3);
   }
   free(fr);
 }
@@ -524,22 +534,13 @@ static void test_replay_anchor_stop(void **state) {
   (void)state;
   const double v = 0.1, dt = 0.001;
   enum { N = 200, STOP = 65, ANCHOR = 59 };
-  nd_rollout r;
-  rec_alloc(&r, N, dt, ND_CTRL_FORCE);
   nds_model nm;
   nds_test_build(&nm, dt, NULL);
+  nd_rollout r;
   nds_state s0;
   const double ee[2] = {-0.3, 0.2};
-  nds_state_rest(&nm, 0, 0, 0, ee, &s0);
-  nds_replay_start_put(&r, &s0);
-  for (int k = 0; k < N; k++) {
-    double *o = nd_rollout_obj(&r, k);
-    memcpy(o, s0.obj_pos, 3 * sizeof(double));
-    memcpy(o + 3, s0.obj_quat, 4 * sizeof(double));
-    o[0] += v * dt * ((k < STOP ? k : STOP - 1) + 1);
-    r.ee[2 * k] = ee[0], r.ee[2 * k + 1] = ee[1];
-    nds_replay_sp_put(r.sp + 6 * k, (const double[2][4]){{ee[0], 0, 0, 0}, {ee[1], 0, 0, 0}});
-  }
+  rest_record(&nm, N, ND_CTRL_FORCE, ee, &r, &s0);  /* no force: the sphere stays away */
+  for (int k = 0; k < N; k++) nd_rollout_obj(&r, k)[0] += v * dt * ((k < STOP ? k : STOP - 1) + 1);
   mjData *d = mj_makeData(nm.m);
   nds_replay_cfg rc;
   nds_replay_cfg_default(&rc, NDS_REPLAY_FORCE);
