@@ -87,6 +87,7 @@ void nds_fit_cfg_default(nds_fit_cfg *cfg) {
   cfg->robust = NDS_FIT_ROBUST;
   cfg->lm_fd = NDS_FIT_LM_FD;
   cfg->prune = 1;
+  cfg->phases = 1;
   nds_replay_cfg_default(&cfg->replay, NDS_FIT_MODE_DEFAULT);
   cfg->replay.window = NDS_FIT_WINDOW;
   cfg->step_std = NDS_FIT_STEP_STD;
@@ -129,6 +130,12 @@ int nds_fit_cfg_check(const nds_fit_cfg *c, char *err, int errlen) {
     bad = "replay.window must be finite and >= 0";
   else if (!(isfinite(c->replay.smooth) && c->replay.smooth >= 0 && c->replay.smooth <= 1))
     bad = "replay.smooth must be in [0, 1] s";
+  else if (c->replay.phase != 0)
+    bad = "replay.phase must be 0: the fit sets it (phases)";
+  else if (c->phases < 1 || c->phases > NDS_FIT_MAX_PHASES)
+    bad = "phases must be in [1, 16]";
+  else if (c->phases > 1 && !(c->replay.window > 0 && c->robust == 0 && c->lm_iters == 0))
+    bad = "phases > 1 needs replay.window > 0, robust 0 and lm_iters 0";
   if (bad) {
     snprintf(err, errlen, "fit: %s", bad);
     return -1;
@@ -397,9 +404,13 @@ static void replay_task(void *ctx, int task, int worker) {
       memset(out, 0, sizeof(*out));
       out->pos_o = out->pos_ee = out->rot_o = out->robust = NDS_REPLAY_DIVERGED;
       out->diverged = 1;
-    } else if (nds_replay_bounded(nm, f->data[worker], &f->cfg.replay, &f->rs[r], f->cfg.k1,
-                                  f->cfg.k2, f->robust, bound, out, err, sizeof(err))) {
-      failed = 1;
+    } else {
+      const int ph = f->cfg.phases;
+      nds_replay_cfg rc = f->cfg.replay;
+      rc.phase = (r % ph) * rc.window / ph;
+      if (nds_replay_bounded(nm, f->data[worker], &rc, &f->rs[r / ph], f->cfg.k1, f->cfg.k2,
+                             f->robust, bound, out, err, sizeof(err)))
+        failed = 1;
     }
   }
 
@@ -487,7 +498,7 @@ static void eval_batch(nds_fit *f, int ncand, int prune, double robust, double *
   for (int c = 0; c < ncand; c++) {
     double L = 0;
     for (int r = 0; r < f->nr; r++) L += score(f, &f->terms[(size_t)c * f->nr + r]);
-    loss[c] = f->cut[c] ? INFINITY : L;
+    loss[c] = f->cut[c] ? INFINITY : L / f->cfg.phases;
   }
 }
 
@@ -518,7 +529,7 @@ static int check_buffer(nds_fit *f, const nd_rollout *rs, int n, char *err, int 
       return -1;
     }
   }
-  return reserve(f, n, err, errlen);
+  return reserve(f, n * f->cfg.phases, err, errlen);
 }
 
 /* nds_fit_loss and nds_fit_score: theta alone, scored with robust. */
@@ -526,13 +537,25 @@ static int eval_one(nds_fit *f, const double theta[ND_NTHETA], const nd_rollout 
                     double robust, double *loss, nds_replay_terms *per, char *err,
                     int errlen) {
   if (nd_theta_check(theta, err, errlen) || check_buffer(f, rs, n, err, errlen)) return -1;
+  const int ph = f->cfg.phases;
   f->rs = rs;
-  f->nr = n;
+  f->nr = n * ph;
   f->task_err = 0;
   memcpy(f->theta, theta, sizeof(double) * ND_NTHETA);
   f->nrun = 0;
   eval_batch(f, 1, 0, robust, loss);
-  if (per) memcpy(per, f->terms, sizeof(*per) * n);
+  for (int r = 0; per && r < n; r++) {
+    /* A rollout's terms: the mean over its phases. */
+    nds_replay_terms *o = &per[r];
+    *o = f->terms[(size_t)r * ph];
+    for (int i = 1; i < ph; i++) {
+      const nds_replay_terms *t = &f->terms[(size_t)r * ph + i];
+      o->pos_o += t->pos_o, o->pos_ee += t->pos_ee, o->rot_o += t->rot_o;
+      o->diverged |= t->diverged;
+    }
+    o->pos_o /= ph, o->pos_ee /= ph, o->rot_o /= ph;
+    if (o->diverged) o->pos_o = o->pos_ee = o->rot_o = NDS_REPLAY_DIVERGED;
+  }
   return 0;
 }
 
@@ -550,7 +573,7 @@ int nds_fit_run(nds_fit *f, const nd_rollout *rs, int n, nds_fit_out *out, char 
                 int errlen) {
   if (check_buffer(f, rs, n, err, errlen)) return -1;
   f->rs = rs;
-  f->nr = n;
+  f->nr = n * f->cfg.phases;
   f->task_err = 0;
   f->nrun = 0;
 
@@ -604,7 +627,7 @@ int nds_fit_run(nds_fit *f, const nd_rollout *rs, int n, nds_fit_out *out, char 
 
   memcpy(f->theta, out->mean, sizeof(out->mean));
   eval_batch(f, 1, 0, 0, &out->loss_mean);
-  for (int r = 0; r < n; r++) out->diverged_mean += f->terms[r].diverged;
+  for (int r = 0; r < f->nr; r++) out->diverged_mean += f->terms[r].diverged;
   out->replays = f->nrun + out->lm_replays;
   return 0;
 }

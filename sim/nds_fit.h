@@ -24,6 +24,7 @@
 #include "nds_replay.h"
 
 #define NDS_FIT_MAX_ITERS 16
+#define NDS_FIT_MAX_PHASES 16
 
 /* Re-anchoring window, s, for records whose object pose was interpolated between
  * motion-capture frames (nudge-tasks: MOCAP at 240 Hz, steps at 1 kHz) rather than
@@ -59,7 +60,14 @@ typedef struct {
                                   paper's. Reported losses are L either way */
   int prune;                   /* 1: stop replaying a candidate once it cannot be an elite
                                   (same results, less work: see nds_fit.c); 0: replay all */
-  nds_replay_cfg replay;       /* how rollouts are replayed (mode, robot controller) */
+  nds_replay_cfg replay;       /* how rollouts are replayed (mode, robot controller); its
+                                  phase is the fit's to set (below) */
+  int phases;                  /* >= 1: each rollout is replayed this many times, its
+                                  anchors shifted by window / phases each time, and scored
+                                  by the mean: the contact chaos each set of anchors starts
+                                  averages out of L (doc/decisions.md#replay-phases). 1, the
+                                  default: once, unshifted. More than 1 needs a window, L's
+                                  ranking (robust 0) and no refinement (lm_iters 0) */
   int lm_iters;                /* > 0: after CEM, at most this many Levenberg-Marquardt
                                   iterations on the replays' residuals from CEM's mean, which
                                   also give a covariance (nds_fit_out.lm_*); 0: off */

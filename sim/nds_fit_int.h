@@ -29,7 +29,8 @@ struct nds_fit {
 
   /* The current batch, read by the tasks. */
   const nd_rollout *rs;
-  int nr;
+  int nr;               /* replays per candidate: rollouts x cfg.phases; replay i is
+                         * rollout i / phases at phase i % phases */
   int task_err;         /* a task could not replay (only on a record changed under us) */
 
   /* Pruning (cfg.prune): a candidate is dropped once the L of its finished and running

@@ -27,6 +27,7 @@ void nds_replay_cfg_default(nds_replay_cfg *cfg, int mode) {
   cfg->ctrl.kv = 0;
   cfg->window = 0;
   cfg->smooth = 0;
+  cfg->phase = 0;
 }
 
 const char *nds_replay_mode_name(int mode) {
@@ -285,6 +286,11 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
     snprintf(err, errlen, "replay: window = %g s, must be finite and >= 0", cfg->window);
     return -1;
   }
+  if (!(cfg->phase >= 0 && (cfg->phase == 0 || cfg->phase < cfg->window))) {
+    snprintf(err, errlen, "replay: phase = %g s, must be in [0, window = %g s)", cfg->phase,
+             cfg->window);
+    return -1;
+  }
   /* A force taken for a velocity (or back) would replay nonsense that still scores. */
   if ((mode == NDS_REPLAY_FORCE && r->control != ND_CTRL_FORCE) ||
       (mode == NDS_REPLAY_VELOCITY && r->control != ND_CTRL_VELOCITY)) {
@@ -314,6 +320,7 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
   nds_ctrl_reset(&pid, m->body_mass[nm->ee_body]);
   const double mdt = m->opt.timestep;
   const long W = window_steps(cfg, mdt);
+  const long shift = W ? lround(cfg->phase / mdt) % W : 0;
   /* The robust score's windows are the re-anchoring ones (the whole replay is one when not
    * re-anchoring). rs sums the finished windows' log(1 + e_w / robust), ws the running
    * window's weighted errors. e_w divides by the window's full length wlen, known in
@@ -326,7 +333,7 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
   double rs = 0, ws = 0, wcap = robust > 0 ? wlen * robust * expm1(limit) : 0;
   for (; j < T && !diverged && !cut; j++) {
     const int base = j * k;
-    if (W && j > 0 && j % W == 0) reanchor(nm, d, cfg, r, base - 1);
+    if (W && j > 0 && (j + shift) % W == 0) reanchor(nm, d, cfg, r, base - 1);
     const double vel[2] = {d->qvel[dof0], d->qvel[dof1]};
     double f[2];
     if (mode == NDS_REPLAY_SETPOINT) {

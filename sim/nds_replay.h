@@ -51,6 +51,9 @@ typedef struct {
                           initial state, the paper's replay */
   double smooth;       /* s; > 0: re-anchor the object on a local fit of its observations
                           within smooth of the anchor (below); 0: on the observation */
+  double phase;        /* s, in [0, window): the anchors fall window - phase, 2 window -
+                          phase, ... into the record; 0, the default: window, 2 window, ...
+                          (the robust score's windows stay unshifted) */
 } nds_replay_cfg;
 
 /* Re-anchoring (multiple shooting). With window > 0, every window seconds of model time

@@ -67,6 +67,11 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
                "(of the fits around, before and after the anchor the closest), which averages "
                "motion capture's noise out of the anchors' rates (0: on the observation and a "
                "one-step difference, exact for noiseless records)"},
+      {"replay-phases", ND_OPT_INT, &fc->phases, 1, NDS_FIT_MAX_PHASES, .arg = "P",
+       .help = "replay each rollout P times, its anchors shifted by the window / P each "
+               "time, and score the mean: the contact chaos each set of anchors sets off "
+               "averages out of the loss, at P times the replays (needs a --replay-window; "
+               "not with --robust or --lm-iters)"},
       {"robust", ND_OPT_DOUBLE, &o->robust, 0, 1, .arg = "S",
        .help = "rank candidates by the replay windows' robust score of scale S m^2 (0: by L, "
                "the paper's)"},
@@ -106,6 +111,9 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
                         : snprintf(o->history, sizeof(o->history), "%s.history", o->buffer);
   if (n < 0 || n >= (int)sizeof(o->history) || strlen(o->buffer) >= ND_RFILE_PATH_MAX)
     return nd_opt_fail(&spec, "--buffer / --history: path too long");
+  if (fc->phases > 1 && !(o->replay_window > 0 && o->robust == 0 && fc->lm_iters == 0))
+    return nd_opt_fail(&spec, "--replay-phases %d needs --replay-window above 0 and neither "
+                       "--robust nor --lm-iters", fc->phases);
   for (int i = 0; i < ND_NTHETA; i++) {
     /* The paper's width vanishes for a nominal value of 0. */
     if ((o->fit >> i & 1) && !(o->ref[i] > 0.0))

@@ -202,6 +202,9 @@ bad nudge-adapter "--fit|no parameter" --fit ,
 bad nudge-adapter "--buffer FILE is required"
 bad nudge-adapter "--history|empty value" --buffer x.nrb --history ''
 bad nudge-adapter "--prior-ref|slide is fitted|> 0" --buffer x.nrb --prior-ref 0,0.005,0.0001,1
+bad nudge-adapter "--replay-phases|out of range" --buffer x.nrb --replay-phases 17
+bad nudge-adapter "--replay-phases 2 needs --replay-window" --buffer x.nrb --replay-phases 2 --replay-window 0
+bad nudge-adapter "--replay-phases 4 needs|--robust" --buffer x.nrb --replay-phases 4 --robust 1e-9
 
 bad nudge-tasks "--goal|'nan,0,0'|x: 'nan' is not a finite number" --goal nan,0,0
 bad nudge-tasks "--goal|'0,inf,0'" --goal 0,inf,0

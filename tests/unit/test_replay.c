@@ -1021,6 +1021,112 @@ static void test_fit_flat_no_contact(void **state) {
   nds_model_free(&nm);
 }
 
+/* The object's position error of each predicted row against the record. */
+static void obj_errors(const nd_rollout *r, const double *pred, double *e) {
+  for (int k = 0; k < r->n; k++)
+    e[k] = hypot(pred[5 * k] - nd_rollout_obj(r, k)[0], pred[5 * k + 1] - nd_rollout_obj(r, k)[1]);
+}
+
+/* A phase moves the anchors: the rows just after the shifted anchors are near the record
+ * (the model restarts from what was observed) where the unshifted replay is mid-window,
+ * and the other way round. A phase outside [0, window) is refused by name. */
+static void test_replay_phase(void **state) {
+  (void)state;
+  const double th[ND_NTHETA] = {0.9, 0.005, 1e-4, 1.0};
+  nds_model nm;
+  nds_test_build(&nm, 0.001, th);
+  mjData *d = mj_makeData(nm.m);
+  const nd_rollout *r = &push[0];
+  double *pred = malloc(sizeof(double) * NDS_REPLAY_PRED_COLS * r->n);
+  double *e0 = malloc(sizeof(double) * r->n), *e1 = malloc(sizeof(double) * r->n);
+  nds_replay_cfg rc;
+  nds_replay_cfg_default(&rc, NDS_REPLAY_FORCE);
+  rc.window = 0.1;
+  nds_replay_terms t;
+  char err[256];
+  assert_int_equal(nds_replay(&nm, d, &rc, r, &t, pred, err, sizeof(err)), 0);
+  obj_errors(r, pred, e0);
+  rc.phase = 0.05;
+  assert_int_equal(nds_replay(&nm, d, &rc, r, &t, pred, err, sizeof(err)), 0);
+  obj_errors(r, pred, e1);
+  /* Anchors every 100 steps: unshifted at 100, 200, ...; shifted at 50, 150, ... */
+  double s0_at0 = 0, s1_at0 = 0, s0_at1 = 0, s1_at1 = 0;
+  for (int j = 50; j < r->n; j += 50) {
+    if (j % 100 == 0) s0_at0 += e0[j], s1_at0 += e1[j];
+    else s0_at1 += e0[j], s1_at1 += e1[j];
+  }
+  printf("phase: error at the unshifted anchors %.2e (shifted replay %.2e), at the shifted "
+         "%.2e (unshifted replay %.2e)\n", s0_at0, s1_at0, s1_at1, s0_at1);
+  assert_true(s1_at0 > 1e-3 && s0_at1 > 1e-3);
+  assert_true(s0_at0 < 0.1 * s1_at0 && s1_at1 < 0.1 * s0_at1);
+  const double bad[3] = {-0.01, 0.1, NAN};
+  for (int i = 0; i < 3; i++) {
+    rc.phase = bad[i];
+    err[0] = 0;
+    assert_int_equal(nds_replay(&nm, d, &rc, r, &t, NULL, err, sizeof(err)), -1);
+    assert_non_null(strstr(err, "phase"));
+  }
+  free(e1);
+  free(e0);
+  free(pred);
+  mj_deleteData(d);
+  nds_model_free(&nm);
+}
+
+/* With phases P the fit scores each rollout at P phases, window / P apart, and takes the
+ * mean: nds_fit_loss equals the replays' own mean, and a run completes on it. */
+static void test_fit_phases(void **state) {
+  (void)state;
+  const double th[ND_NTHETA] = {0.9, 0.004, 1e-4, 1.0};
+  char err[256];
+  nds_model nm;
+  nds_test_build(&nm, 0.001, NULL);
+  nd_pool *pool = nd_pool_create(2, err, sizeof(err));
+  assert_non_null(pool);
+  nds_fit_cfg cfg;
+  nds_fit_cfg_default(&cfg);
+  cfg.replay.window = 0.1;
+  cfg.phases = 3;
+  cfg.pop = 8;
+  cfg.iters = 1;
+  nds_fit *f = nds_fit_create(&nm, &cfg, pool, err, sizeof(err));
+  assert_non_null(f);
+  double L;
+  nds_replay_terms per[NPUSH];
+  assert_int_equal(nds_fit_loss(f, th, push, NPUSH, &L, per, err, sizeof(err)), 0);
+
+  nds_model nb;
+  nds_test_build(&nb, 0.001, th);
+  mjData *d = mj_makeData(nb.m);
+  double sum = 0, L1 = 0;
+  for (int r = 0; r < NPUSH; r++) {
+    double rot = 0;
+    for (int i = 0; i < 3; i++) {
+      nds_replay_cfg rc = cfg.replay;
+      rc.phase = i * rc.window / 3;
+      nds_replay_terms t;
+      assert_int_equal(nds_replay(&nb, d, &rc, &push[r], &t, NULL, err, sizeof(err)), 0);
+      sum += nds_replay_loss(&t, cfg.k1, cfg.k2);
+      rot += t.rot_o;
+      if (i == 0) L1 += nds_replay_loss(&t, cfg.k1, cfg.k2);
+    }
+    assert_near(per[r].rot_o, rot / 3, 1e-12 * rot);
+  }
+  printf("phases: L over 3 phases %.4e, unshifted alone %.4e\n", L, L1);
+  assert_near(L, sum / 3, 1e-12 * sum);
+  assert_true(fabs(L - L1) > 1e-3 * L1); /* the phases do score differently */
+
+  nds_fit_out out;
+  assert_int_equal(nds_fit_run(f, push, NPUSH, &out, err, sizeof(err)), 0);
+  assert_true(isfinite(out.loss_mean) && out.loss_mean > 0);
+  assert_true(out.replays > 3 * NPUSH && out.replays <= (cfg.pop + 1) * 3 * NPUSH);
+  mj_deleteData(d);
+  nds_model_free(&nb);
+  nds_fit_free(f);
+  nd_pool_free(pool);
+  nds_model_free(&nm);
+}
+
 /* Every bad field of the configuration is refused by name; a bad distribution too. */
 static void test_fit_bad_config(void **state) {
   (void)state;
@@ -1038,7 +1144,7 @@ static void test_fit_bad_config(void **state) {
   struct {
     const char *what;
     nds_fit_cfg c;
-  } bad[26];
+  } bad[32];
   int nb = 0;
 #define BAD(name, stmt)   \
   bad[nb].what = name;    \
@@ -1061,6 +1167,12 @@ static void test_fit_bad_config(void **state) {
   BAD("replay.window", c->replay.window = -0.1);
   BAD("replay.smooth", c->replay.smooth = NAN);
   BAD("replay.smooth", c->replay.smooth = 2);
+  BAD("replay.phase", c->replay.phase = 0.001);
+  BAD("phases", c->phases = 0);
+  BAD("phases", c->phases = NDS_FIT_MAX_PHASES + 1);
+  BAD("phases > 1", (c->phases = 2, c->replay.window = 0));
+  BAD("phases > 1", (c->phases = 2, c->robust = 1e-9));
+  BAD("phases > 1", (c->phases = 2, c->lm_iters = 2));
   BAD("fit[1]", c->fit[1] = 2);
   BAD("no parameter", c->fit[0] = c->fit[1] = c->fit[2] = 0);
   BAD("slide prior", c->sigma0[0] = 0);
@@ -1169,6 +1281,7 @@ int main(void) {
       cmocka_unit_test(test_replay_velocity),
       cmocka_unit_test(test_replay_anchor_fit),
       cmocka_unit_test(test_replay_anchor_stop),
+      cmocka_unit_test(test_replay_phase),
       cmocka_unit_test(test_replay_bad_records),
       cmocka_unit_test(test_torsion_landscape),
       cmocka_unit_test(test_fit_recovers_sliding),
@@ -1176,6 +1289,7 @@ int main(void) {
       cmocka_unit_test(test_fit_log_torsion),
       cmocka_unit_test(test_fit_workers_identical),
       cmocka_unit_test(test_fit_flat_no_contact),
+      cmocka_unit_test(test_fit_phases),
       cmocka_unit_test(test_fit_bad_config),
       cmocka_unit_test(test_fit_bad_buffer),
   };
