@@ -110,6 +110,7 @@ static const char *pname[ND_NTHETA] = {"slide", "torsion", "roll", "mass"};
 
 int nds_fit_cfg_check(const nds_fit_cfg *c, char *err, int errlen) {
   const char *bad = NULL;
+  char rerr[160];
   if (c->pop < 2) bad = "pop (Q) must be >= 2";
   else if (c->iters < 1 || c->iters > NDS_FIT_MAX_ITERS) bad = "iters (C) must be in [1, 16]";
   else if (!(c->elite_frac > 0 && c->elite_frac <= 1)) bad = "elite_frac must be in (0, 1]";
@@ -123,13 +124,8 @@ int nds_fit_cfg_check(const nds_fit_cfg *c, char *err, int errlen) {
   else if (!(isfinite(c->step_gate) && c->step_gate >= 0)) bad = "step_gate must be finite and >= 0";
   else if (!(isfinite(c->rel_floor) && c->rel_floor >= 0 && c->rel_floor < 1))
     bad = "rel_floor must be in [0, 1)";
-  else if (c->replay.mode != NDS_REPLAY_FORCE && c->replay.mode != NDS_REPLAY_VELOCITY &&
-           c->replay.mode != NDS_REPLAY_SETPOINT)
-    bad = "replay.mode must be NDS_REPLAY_FORCE, _VELOCITY or _SETPOINT";
-  else if (!(isfinite(c->replay.window) && c->replay.window >= 0))
-    bad = "replay.window must be finite and >= 0";
-  else if (!(isfinite(c->replay.smooth) && c->replay.smooth >= 0 && c->replay.smooth <= 1))
-    bad = "replay.smooth must be in [0, 1] s";
+  else if (nds_replay_cfg_check(&c->replay, rerr, sizeof(rerr)))
+    bad = rerr;
   else if (c->replay.phase != 0)
     bad = "replay.phase must be 0: the fit sets it (phases)";
   else if (c->phases < 1 || c->phases > NDS_FIT_MAX_PHASES)

@@ -30,6 +30,22 @@ void nds_replay_cfg_default(nds_replay_cfg *cfg, int mode) {
   cfg->phase = 0;
 }
 
+int nds_replay_cfg_check(const nds_replay_cfg *cfg, char *err, int errlen) {
+  const int mode = cfg->mode;
+  if (mode != NDS_REPLAY_FORCE && mode != NDS_REPLAY_VELOCITY && mode != NDS_REPLAY_SETPOINT)
+    snprintf(err, errlen, "replay.mode: unknown replay mode %d", mode);
+  else if (!(isfinite(cfg->window) && cfg->window >= 0))
+    snprintf(err, errlen, "replay.window = %g s, must be finite and >= 0", cfg->window);
+  else if (!(isfinite(cfg->smooth) && cfg->smooth >= 0 && cfg->smooth <= 1))
+    snprintf(err, errlen, "replay.smooth = %g s, must be in [0, 1]", cfg->smooth);
+  else if (!(cfg->phase == 0 || (cfg->phase > 0 && cfg->phase < cfg->window)))
+    snprintf(err, errlen, "replay.phase = %g s, must be in [0, window = %g s)", cfg->phase,
+             cfg->window);
+  else
+    return 0;
+  return -1;
+}
+
 const char *nds_replay_mode_name(int mode) {
   switch (mode) {
     case NDS_REPLAY_FORCE: return "force";
@@ -274,23 +290,7 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
   int k = nds_replay_ratio(nm, r, err, errlen);
   if (k < 0) return -1;
   const int mode = cfg->mode;
-  if (mode != NDS_REPLAY_FORCE && mode != NDS_REPLAY_VELOCITY && mode != NDS_REPLAY_SETPOINT) {
-    snprintf(err, errlen, "replay: unknown replay mode %d", mode);
-    return -1;
-  }
-  if (!(isfinite(cfg->smooth) && cfg->smooth >= 0 && cfg->smooth <= 1)) {
-    snprintf(err, errlen, "replay: smooth = %g s, must be in [0, 1]", cfg->smooth);
-    return -1;
-  }
-  if (!(isfinite(cfg->window) && cfg->window >= 0)) {
-    snprintf(err, errlen, "replay: window = %g s, must be finite and >= 0", cfg->window);
-    return -1;
-  }
-  if (!(cfg->phase >= 0 && (cfg->phase == 0 || cfg->phase < cfg->window))) {
-    snprintf(err, errlen, "replay: phase = %g s, must be in [0, window = %g s)", cfg->phase,
-             cfg->window);
-    return -1;
-  }
+  if (nds_replay_cfg_check(cfg, err, errlen)) return -1;
   /* A force taken for a velocity (or back) would replay nonsense that still scores. */
   if ((mode == NDS_REPLAY_FORCE && r->control != ND_CTRL_FORCE) ||
       (mode == NDS_REPLAY_VELOCITY && r->control != ND_CTRL_VELOCITY)) {

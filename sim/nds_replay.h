@@ -82,6 +82,9 @@ typedef struct {
 /* mode with the default controller (nds_ctrl_cfg_default), no re-anchoring. */
 void nds_replay_cfg_default(nds_replay_cfg *cfg, int mode);
 
+/* Check cfg's mode, window, smooth and phase. Return 0, or -1 naming the bad field. */
+int nds_replay_cfg_check(const nds_replay_cfg *cfg, char *err, int errlen);
+
 /* "force", "velocity", "setpoint"; "?" for an unknown mode. */
 const char *nds_replay_mode_name(int mode);
 
