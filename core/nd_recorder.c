@@ -142,66 +142,24 @@ void nd_recorder_state(nd_recorder *rc, const nd_rec_state *s) {
   memcpy(rc->last_ee, ee, sizeof(ee));
 }
 
-/* Frame k's pose, its quaternion on the side of the double cover nearer the quaternion ref
- * (NULL: as stored). */
-static void frame_pose(const nd_recorder *rc, int k, const double *ref, double p[ND_ROLLOUT_OBJ]) {
-  memcpy(p, rc->frame + ND_ROLLOUT_OBJ * k, ND_ROLLOUT_OBJ * sizeof(double));
-  if (ref && p[3] * ref[0] + p[4] * ref[1] + p[5] * ref[2] + p[6] * ref[3] < 0)
-    for (int c = 3; c < ND_ROLLOUT_OBJ; c++) p[c] = -p[c];
-}
-
-/* The rate of the pose at frame k, per us, from its neighbours (quaternions aligned to
- * ref): the three-point difference for uneven spacing, exact for a quadratic; the one
- * secant at the first and last frame. */
-static void frame_rate(const nd_recorder *rc, int k, const double *ref, double m[ND_ROLLOUT_OBJ]) {
-  const int lo = k > 0 ? k - 1 : k, hi = k + 1 < rc->nframes ? k + 1 : k;
-  double a[ND_ROLLOUT_OBJ], b[ND_ROLLOUT_OBJ], c[ND_ROLLOUT_OBJ];
-  frame_pose(rc, lo, ref, a);
-  frame_pose(rc, k, ref, b);
-  frame_pose(rc, hi, ref, c);
-  const double h0 = (double)(rc->frame_us[k] - rc->frame_us[lo]);
-  const double h1 = (double)(rc->frame_us[hi] - rc->frame_us[k]);
-  for (int i = 0; i < ND_ROLLOUT_OBJ; i++) {
-    const double d0 = h0 > 0 ? (b[i] - a[i]) / h0 : 0, d1 = h1 > 0 ? (c[i] - b[i]) / h1 : 0;
-    m[i] = h0 > 0 && h1 > 0 ? (d0 * h1 + d1 * h0) / (h0 + h1) : d0 + d1;
-  }
-}
-
-/* The object at every step: the frames joined by a cubic Hermite curve in time (positions
- * and quaternion components, then normalised), held beyond the first and last frame. A
- * straight line between 240 Hz frames gives every step of a frame interval one rate, and
- * the replay's anchors take their rates from the steps: the cubic's follow the motion
- * (doc/decisions.md#cubic-frames). It passes through every frame, as the line does, and
- * is exact for a pose quadratic in time. */
+/* The object at every step: frames interpolated to the step's time, held beyond the
+ * first and last frame. */
 static void objects(nd_recorder *rc) {
   int j = 0;
-  double a[ND_ROLLOUT_OBJ], b[ND_ROLLOUT_OBJ], ma[ND_ROLLOUT_OBJ], mb[ND_ROLLOUT_OBJ];
-  int seg = -1;
   for (int i = 0; i < rc->steps; i++) {
     const int64_t t = rc->step_us[i];
     while (j + 1 < rc->nframes && rc->frame_us[j + 1] <= t) j++;
+    const double *a = rc->frame + ND_ROLLOUT_OBJ * j;
     double *o = nd_rollout_obj(&rc->r, i);
-    if (!(j + 1 < rc->nframes && rc->frame_us[j] <= t)) {
-      memcpy(o, rc->frame + ND_ROLLOUT_OBJ * j, ND_ROLLOUT_OBJ * sizeof(double));
-      continue;
+    if (j + 1 < rc->nframes && rc->frame_us[j] <= t) {
+      const double *b = a + ND_ROLLOUT_OBJ;
+      const double f =
+          (double)(t - rc->frame_us[j]) / (double)(rc->frame_us[j + 1] - rc->frame_us[j]);
+      for (int c = 0; c < 3; c++) o[c] = a[c] + f * (b[c] - a[c]);
+      nd_quat_nlerp(a + 3, b + 3, f, o + 3);
+    } else {
+      memcpy(o, a, ND_ROLLOUT_OBJ * sizeof(double));
     }
-    if (seg != j) {  /* a new frame interval: its ends and their rates */
-      seg = j;
-      frame_pose(rc, j, NULL, a);
-      frame_pose(rc, j + 1, a + 3, b);
-      frame_rate(rc, j, a + 3, ma);
-      frame_rate(rc, j + 1, a + 3, mb);
-    }
-    const double h = (double)(rc->frame_us[j + 1] - rc->frame_us[j]);
-    const double s = (double)(t - rc->frame_us[j]) / h, s2 = s * s, s3 = s2 * s;
-    const double h00 = 2 * s3 - 3 * s2 + 1, h10 = s3 - 2 * s2 + s, h01 = 3 * s2 - 2 * s3,
-                 h11 = s3 - s2;
-    for (int c = 0; c < ND_ROLLOUT_OBJ; c++)
-      o[c] = h00 * a[c] + h10 * h * ma[c] + h01 * b[c] + h11 * h * mb[c];
-    double n = 0;
-    for (int c = 3; c < ND_ROLLOUT_OBJ; c++) n += o[c] * o[c];
-    n = sqrt(n);
-    for (int c = 3; c < ND_ROLLOUT_OBJ; c++) o[c] /= n;
   }
 }
 

@@ -5,9 +5,8 @@
  * state (the robot's control step: u = what it applied during the step, the force or the
  * end-effector velocity as the rollout's control says; ee = the sphere after it), sp = the
  * newest setpoint seen before that state, obj = the object's pose interpolated to the
- * step's time (frames come at the motion-capture rate, 240 Hz, steps at 1 kHz: a cubic
- * Hermite curve through the frames, quaternions normalised; held beyond the first and last
- * frame).
+ * step's time (frames come at the motion-capture rate, 240 Hz, steps at 1 kHz: positions
+ * linearly, orientations by nlerp; held beyond the first and last frame).
  *
  * Messages lost on the way show as gaps in the states' sequence numbers: a gap of up to
  * ND_REC_GAP_FILL_MAX steps is filled by linear interpolation between its neighbours; a

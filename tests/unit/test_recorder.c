@@ -1,5 +1,5 @@
 /* test_recorder: a rollout from sensor streams (core/nd_recorder.c): object frames
- * interpolated to the steps along a cubic, lost states filled, and the tasks that must not be recorded
+ * interpolated to the steps, lost states filled, and the tasks that must not be recorded
  * refused with the reason. */
 #include <string.h>
 
@@ -14,18 +14,13 @@ static nd_recorder rc;
 static const double goal[3] = {0.2, 0.0, 0.3};
 
 /* The scripted world: the sphere moves along x at 0.1 m/s, pushing with 2 N; the object
- * slides along x at 0.05 m/s and turns at 0.5 rad/s; with accel, it also accelerates at
- * 2 m/s^2 along x and 4 rad/s^2 in yaw, as a pushed box does. */
-static int accel;
-static double obj_x(double t) { return 0.05 * t + (accel ? t * t : 0); }
-static double obj_yaw(double t) { return 0.5 * t + (accel ? 2 * t * t : 0); }
-
+ * slides along x at 0.05 m/s and turns at 0.5 rad/s. */
 static void truth(int64_t us, double ee[2], double pose[ND_ROLLOUT_OBJ]) {
   const double t = 1e-6 * (double)(us - U0);
   ee[0] = -0.1 + 0.1 * t;
   ee[1] = 0.01;
-  pose[0] = obj_x(t), pose[1] = 0.0, pose[2] = 0.025;
-  nd_yaw_quat(obj_yaw(t), pose + 3);
+  pose[0] = 0.05 * t, pose[1] = 0.0, pose[2] = 0.025;
+  nd_yaw_quat(0.5 * t, pose + 3);
 }
 
 static nd_rec_state state_at(int64_t seq) {
@@ -95,40 +90,6 @@ static void test_interpolates_and_fills(void **state) {
   assert_near(r->sp[6 * 0], r->ee_pos[0], 0);
   assert_near(r->sp[6 * 99], 1.0, 0);     /* step 100: the setpoint posted at k = 100 */
   assert_near(r->sp[6 * 1499], 15.0, 0);
-  nd_recorder_free(&rc);
-}
-
-/* An accelerating object: the steps' poses and their rates over one step (what the
- * replay's anchors take) follow the motion within a frame interval, where a straight line
- * between frames gives one rate per interval, off by up to a h / 2 (4.2 mm/s here). */
-static void test_interpolates_curves(void **state) {
-  (void)state;
-  char err[300];
-  accel = 1;
-  assert_int_equal(nd_recorder_init(&rc, 1.0, DT, err, sizeof err), 0);
-  stream(600, 0, 0, 1);
-  const nd_rollout *r = NULL;
-  assert_int_equal(nd_recorder_finish(&rc, ND_OUTCOME_SUCCESS, &r, err, sizeof err), 0);
-  double worst_pos = 0, worst_yaw = 0, worst_v = 0, worst_w = 0;
-  /* The first and last frame have one neighbour each: their rate is the secant's, so the
-   * intervals next to them are left out. */
-  for (int i = 10; i < r->n - 10; i++) {
-    const double *o = nd_rollout_obj(r, i), *p = nd_rollout_obj(r, i - 1);
-    const double t = DT * (i + 1), tm = t - 0.5 * DT;
-    worst_pos = fmax(worst_pos, fabs(o[0] - obj_x(t)));
-    worst_yaw = fmax(worst_yaw, fabs(nd_wrap_angle(nd_quat_yaw(o + 3) - obj_yaw(t))));
-    /* A difference over one step is the rate at its midpoint, for a quadratic exactly. */
-    worst_v = fmax(worst_v, fabs((o[0] - p[0]) / DT - (0.05 + 2 * tm)));
-    const double w = nd_wrap_angle(nd_quat_yaw(o + 3) - nd_quat_yaw(p + 3)) / DT;
-    worst_w = fmax(worst_w, fabs(w - (0.5 + 4 * tm)));
-  }
-  printf("recorder_curve_err_max %.3g m, yaw %.3g rad; rate %.3g m/s, yaw rate %.3g rad/s\n",
-         worst_pos, worst_yaw, worst_v, worst_w);
-  assert_true(worst_pos < 1e-12);  /* a quadratic is interpolated exactly */
-  assert_true(worst_v < 1e-8);
-  assert_true(worst_yaw < 1e-7);   /* yaw lies on the quaternion's circle: not quadratic */
-  assert_true(worst_w < 1e-4);     /* against 8.3e-3 rad/s for a line between frames */
-  accel = 0;
   nd_recorder_free(&rc);
 }
 
@@ -203,7 +164,6 @@ static void test_capacity(void **state) {
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_interpolates_and_fills),
-      cmocka_unit_test(test_interpolates_curves),
       cmocka_unit_test(test_velocity_control),
       cmocka_unit_test(test_refusals),
       cmocka_unit_test(test_capacity),

@@ -451,9 +451,8 @@ static void test_replay_velocity(void **state) {
 }
 
 /* r's object as motion capture would give it: frames at 240 Hz of src's poses with the
- * lab's noise (0.1 mm and 2e-3 rad per axis), interpolated to each step linearly
- * (positions) and by nd_quat_nlerp: the noise, not the curve between frames, is what the
- * anchors' fits are for. */
+ * lab's noise (0.1 mm and 2e-3 rad per axis), interpolated to each step as nd_recorder
+ * does (positions linearly, orientations by nd_quat_nlerp). */
 static void mocap_frames(const nd_rollout *src, nd_rng *g, nd_rollout *r) {
   const double fdt = 1.0 / 240;
   const int nf = (int)((src->n + 1) * src->dt / fdt) + 2;
