@@ -142,24 +142,73 @@ void nd_recorder_state(nd_recorder *rc, const nd_rec_state *s) {
   memcpy(rc->last_ee, ee, sizeof(ee));
 }
 
-/* The object at every step: frames interpolated to the step's time, held beyond the
- * first and last frame. */
-static void objects(nd_recorder *rc) {
-  int j = 0;
-  for (int i = 0; i < rc->steps; i++) {
-    const int64_t t = rc->step_us[i];
-    while (j + 1 < rc->nframes && rc->frame_us[j + 1] <= t) j++;
-    const double *a = rc->frame + ND_ROLLOUT_OBJ * j;
-    double *o = nd_rollout_obj(&rc->r, i);
-    if (j + 1 < rc->nframes && rc->frame_us[j] <= t) {
-      const double *b = a + ND_ROLLOUT_OBJ;
-      const double f =
-          (double)(t - rc->frame_us[j]) / (double)(rc->frame_us[j + 1] - rc->frame_us[j]);
-      for (int c = 0; c < 3; c++) o[c] = a[c] + f * (b[c] - a[c]);
-      nd_quat_nlerp(a + 3, b + 3, f, o + 3);
-    } else {
-      memcpy(o, a, ND_ROLLOUT_OBJ * sizeof(double));
+/* Frame k's pose, its quaternion on the side of the double cover nearer the quaternion ref
+ * (NULL: as stored). */
+static void frame_pose(const double *frame, int k, const double *ref, double p[ND_ROLLOUT_OBJ]) {
+  memcpy(p, frame + ND_ROLLOUT_OBJ * k, ND_ROLLOUT_OBJ * sizeof(double));
+  if (ref && p[3] * ref[0] + p[4] * ref[1] + p[5] * ref[2] + p[6] * ref[3] < 0)
+    for (int c = 3; c < ND_ROLLOUT_OBJ; c++) p[c] = -p[c];
+}
+
+/* The pose's rate at frame k, per us, from its neighbours (quaternions aligned to ref):
+ * the three-point difference for uneven spacing, exact for a quadratic; the one secant at
+ * the first and last frame. */
+static void frame_rate(const int64_t *us, const double *frame, int n, int k, const double *ref,
+                       double m[ND_ROLLOUT_OBJ]) {
+  const int lo = k > 0 ? k - 1 : k, hi = k + 1 < n ? k + 1 : k;
+  double a[ND_ROLLOUT_OBJ], b[ND_ROLLOUT_OBJ], c[ND_ROLLOUT_OBJ];
+  frame_pose(frame, lo, ref, a);
+  frame_pose(frame, k, ref, b);
+  frame_pose(frame, hi, ref, c);
+  const double h0 = (double)(us[k] - us[lo]), h1 = (double)(us[hi] - us[k]);
+  for (int i = 0; i < ND_ROLLOUT_OBJ; i++) {
+    const double d0 = h0 > 0 ? (b[i] - a[i]) / h0 : 0, d1 = h1 > 0 ? (c[i] - b[i]) / h1 : 0;
+    m[i] = h0 > 0 && h1 > 0 ? (d0 * h1 + d1 * h0) / (h0 + h1) : d0 + d1;
+  }
+}
+
+/* Pose o at fraction s of the interval from pose a (rate ma) to b (mb), h us long. */
+static void cubic(const double *a, const double *ma, const double *b, const double *mb,
+                  double h, double s, double o[ND_ROLLOUT_OBJ]) {
+  const double s2 = s * s, s3 = s2 * s;
+  const double h00 = 2 * s3 - 3 * s2 + 1, h10 = s3 - 2 * s2 + s, h01 = 3 * s2 - 2 * s3,
+               h11 = s3 - s2;
+  for (int c = 0; c < ND_ROLLOUT_OBJ; c++)
+    o[c] = h00 * a[c] + h10 * h * ma[c] + h01 * b[c] + h11 * h * mb[c];
+  double n = 0;
+  for (int c = 3; c < ND_ROLLOUT_OBJ; c++) n += o[c] * o[c];
+  n = sqrt(n);
+  for (int c = 3; c < ND_ROLLOUT_OBJ; c++) o[c] /= n;
+}
+
+void nd_recorder_join(const int64_t *frame_us, const double *frame, int nframes, int join,
+                    const int64_t *t, int n, double *obj) {
+  double a[ND_ROLLOUT_OBJ], b[ND_ROLLOUT_OBJ], ma[ND_ROLLOUT_OBJ], mb[ND_ROLLOUT_OBJ];
+  int j = 0, seg = -1;
+  for (int i = 0; i < n; i++) {
+    while (j + 1 < nframes && frame_us[j + 1] <= t[i]) j++;
+    const double *f0 = frame + ND_ROLLOUT_OBJ * j;
+    double *o = obj + ND_ROLLOUT_OBJ * i;
+    if (!(j + 1 < nframes && frame_us[j] <= t[i])) {
+      memcpy(o, f0, ND_ROLLOUT_OBJ * sizeof(double));
+      continue;
     }
+    const double h = (double)(frame_us[j + 1] - frame_us[j]);
+    const double s = (double)(t[i] - frame_us[j]) / h;
+    if (join == ND_REC_JOIN_LINE) {
+      const double *f1 = f0 + ND_ROLLOUT_OBJ;
+      for (int c = 0; c < 3; c++) o[c] = f0[c] + s * (f1[c] - f0[c]);
+      nd_quat_nlerp(f0 + 3, f1 + 3, s, o + 3);
+      continue;
+    }
+    if (seg != j) {  /* a new frame interval: its ends and their rates */
+      seg = j;
+      frame_pose(frame, j, NULL, a);
+      frame_pose(frame, j + 1, a + 3, b);
+      frame_rate(frame_us, frame, nframes, j, a + 3, ma);
+      frame_rate(frame_us, frame, nframes, j + 1, a + 3, mb);
+    }
+    cubic(a, ma, b, mb, h, s, o);
   }
 }
 
@@ -184,7 +233,8 @@ int nd_recorder_finish(nd_recorder *rc, int outcome, const nd_rollout **out, cha
              "replay would run at the wrong rate", 1e3 * period, 1e3 * rc->dt);
   else {
     rc->r.outcome = outcome;
-    objects(rc);
+    nd_recorder_join(rc->frame_us, rc->frame, rc->nframes, rc->join, rc->step_us, rc->steps,
+                   rc->r.obj);
     rc->r.n = rc->steps;
     *out = &rc->r;
     return 0;

@@ -5,8 +5,8 @@
  * state (the robot's control step: u = what it applied during the step, the force or the
  * end-effector velocity as the rollout's control says; ee = the sphere after it), sp = the
  * newest setpoint seen before that state, obj = the object's pose interpolated to the
- * step's time (frames come at the motion-capture rate, 240 Hz, steps at 1 kHz: positions
- * linearly, orientations by nlerp; held beyond the first and last frame).
+ * step's time (frames come at the motion-capture rate, 240 Hz, steps at 1 kHz; joined as
+ * `join` says, held beyond the first and last frame).
  *
  * Messages lost on the way show as gaps in the states' sequence numbers: a gap of up to
  * ND_REC_GAP_FILL_MAX steps is filled by linear interpolation between its neighbours; a
@@ -25,6 +25,13 @@
 #define ND_REC_GAP_FILL_MAX 20     /* states one filled gap may span */
 #define ND_REC_FILL_MAX_FRAC 0.02  /* of a task's steps, at most this many filled */
 #define ND_REC_DT_TOLERANCE 0.1    /* measured step period vs dt, relative */
+
+/* How the object's frames are joined between their times; both pass through every frame.
+ * A line gives every step of a frame interval one rate, the interval's mean. A cubic
+ * Hermite curve (three-point rates at the frames, quaternions normalised) follows an
+ * accelerating object, exactly if its pose is quadratic in time, and its rates average a
+ * noisy frame over two intervals (doc/decisions.md#frames-per-world). */
+enum { ND_REC_JOIN_LINE = 0, ND_REC_JOIN_CUBIC = 1 };
 
 /* One robot state (ROBOT_STATE). */
 typedef struct {
@@ -55,6 +62,7 @@ typedef struct {
   char broken[200];      /* why this task cannot be recorded; "" if it can */
   nd_rec_setpoint sp;    /* the newest setpoint */
   int have_sp;
+  int join;              /* ND_REC_JOIN_*: LINE after init; set before a task to change */
 } nd_recorder;
 
 /* Allocate for tasks of up to tau s (plus a margin for overruns) at step dt. Return 0, or
@@ -83,5 +91,11 @@ void nd_recorder_frame(nd_recorder *rc, int64_t utime, const double pose[ND_ROLL
  * (valid until the next nd_recorder_begin), or -1 with why it cannot be recorded. */
 int nd_recorder_finish(nd_recorder *rc, int outcome, const nd_rollout **out, char *why,
                        int len);
+
+/* The poses obj[n][7] at times t[n] (increasing) of nframes frames frame[nframes][7] taken
+ * at frame_us (increasing), joined as join (ND_REC_JOIN_*) says, held beyond the first
+ * and last frame. */
+void nd_recorder_join(const int64_t *frame_us, const double *frame, int nframes, int join,
+                    const int64_t *t, int n, double *obj);
 
 #endif

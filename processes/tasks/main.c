@@ -29,6 +29,7 @@ int main(int argc, char **argv) {
       tasks_buffer_close(&buf);
       return 1;
     }
+    buf.rec.join = cfg.record_join;
     io.buf = &buf;
   }
   const char *url = ndp_url(cfg.url);

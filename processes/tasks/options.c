@@ -29,6 +29,8 @@ static const nd_goal chain_lab[] = {
 };
 static const char *const world_words[] = {"ideal", "lab", NULL};
 static const char *const control_words[] = {"force", "velocity", NULL};
+static const char *const join_words[] = {"line", "cubic", NULL};
+_Static_assert(ND_REC_JOIN_LINE == 0 && ND_REC_JOIN_CUBIC == 1, "join_words follow ND_REC_JOIN_*");
 _Static_assert(ND_CTRL_FORCE == 0 && ND_CTRL_VELOCITY == 1, "control_words follow ND_CTRL_*");
 
 static int add_goal(const char *v, const char *what, void *dst, char *err, int errlen) {
@@ -63,7 +65,7 @@ static int add_goals(const char *v, const char *what, void *dst, char *err, int 
 
 int tasks_options(int argc, char **argv, tasks_cfg *c) {
   *c = (tasks_cfg){.eps = 1e-2, .tau = 5.0, .workspace = 0.5, .wait = 10.0, .settle = 0.5,
-                    .record_dt = 0.001};
+                    .record_dt = 0.001, .record_join = ND_REC_JOIN_CUBIC};
   memcpy(c->theta, nd_theta_true, sizeof(c->theta));
   int world = 0;
   nd_opt opts[] = {
@@ -99,6 +101,12 @@ int tasks_options(int argc, char **argv, tasks_cfg *c) {
        .help = "what --record keeps as each step's control: the robot's force (ROBOT_STATE "
                "ee_force, for nudge-adapter --replay-mode force) or its end-effector velocity "
                "(ee_vel, for --replay-mode velocity: a robot's force estimate is poor)"},
+      {"record-frames", ND_OPT_CHOICE, &c->record_join, .choices = join_words, .arg = "JOIN",
+       .def = "cubic; line with --world lab",
+       .help = "how --record joins the object's MOCAP frames between their times: a cubic "
+               "curve follows the object's acceleration and averages noisy frames' rates "
+               "over two frame intervals; a line gives each interval one rate (the lab's fits "
+               "were worse with the cubic, doc/decisions.md#frames-per-world)"},
       {"theta", ND_OPT_THETA, c->theta, .def = "the simulation's ground truth, as the planner",
        .help = "theta recorded as the planner's until PARAMS arrives"},
       {"await-fit", ND_OPT_DOUBLE, &c->await_fit, 0.0, 3600.0, .arg = "S",
@@ -126,6 +134,8 @@ int tasks_options(int argc, char **argv, tasks_cfg *c) {
   if (c->await_fit > 0 && !c->record)
     return nd_opt_fail(&spec, "--await-fit needs --record (it waits for the fit of a record)");
   if (world == 1 && !nd_opt_find(&spec, "tau")->given) c->tau = 8.0;
+  if (world == 1 && !nd_opt_find(&spec, "record-frames")->given) c->record_join = ND_REC_JOIN_LINE;
+
   if (c->n == 0 && world == 1) {
     c->n = (int)(sizeof(chain_lab) / sizeof(chain_lab[0]));
     memcpy(c->goals, chain_lab, sizeof(chain_lab));

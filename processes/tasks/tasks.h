@@ -52,6 +52,7 @@ typedef struct {
   const char *record;            /* replay buffer to append to; NULL: no recording */
   double record_dt;              /* the robot's control step, s */
   int record_control;            /* ND_CTRL_FORCE or ND_CTRL_VELOCITY: what u records */
+  int record_join;               /* ND_REC_JOIN_*: how the object's frames are joined */
   double theta[ND_NTHETA];       /* recorded as the planner's theta until PARAMS arrives */
   double await_fit;              /* s to wait for the adapter's refit after a record; 0 none */
   nd_goal goals[MAX_GOALS];

@@ -1,5 +1,5 @@
 /* test_recorder: a rollout from sensor streams (core/nd_recorder.c): object frames
- * interpolated to the steps, lost states filled, and the tasks that must not be recorded
+ * interpolated to the steps by lines and by a cubic, lost states filled, and the tasks that must not be recorded
  * refused with the reason. */
 #include <string.h>
 
@@ -14,13 +14,18 @@ static nd_recorder rc;
 static const double goal[3] = {0.2, 0.0, 0.3};
 
 /* The scripted world: the sphere moves along x at 0.1 m/s, pushing with 2 N; the object
- * slides along x at 0.05 m/s and turns at 0.5 rad/s. */
+ * slides along x at 0.05 m/s and turns at 0.5 rad/s; with accel, it also accelerates at
+ * 2 m/s^2 along x and 4 rad/s^2 in yaw, as a pushed box does. */
+static int accel;
+static double obj_x(double t) { return 0.05 * t + (accel ? t * t : 0); }
+static double obj_yaw(double t) { return 0.5 * t + (accel ? 2 * t * t : 0); }
+
 static void truth(int64_t us, double ee[2], double pose[ND_ROLLOUT_OBJ]) {
   const double t = 1e-6 * (double)(us - U0);
   ee[0] = -0.1 + 0.1 * t;
   ee[1] = 0.01;
-  pose[0] = 0.05 * t, pose[1] = 0.0, pose[2] = 0.025;
-  nd_yaw_quat(0.5 * t, pose + 3);
+  pose[0] = obj_x(t), pose[1] = 0.0, pose[2] = 0.025;
+  nd_yaw_quat(obj_yaw(t), pose + 3);
 }
 
 static nd_rec_state state_at(int64_t seq) {
@@ -91,6 +96,51 @@ static void test_interpolates_and_fills(void **state) {
   assert_near(r->sp[6 * 99], 1.0, 0);     /* step 100: the setpoint posted at k = 100 */
   assert_near(r->sp[6 * 1499], 15.0, 0);
   nd_recorder_free(&rc);
+}
+
+/* An accelerating object recorded with frames joined by join: the worst errors of the
+ * steps' poses and of their rates over one step (what the replay's anchors take), away
+ * from the first and last frame, whose rate is one secant. */
+static void curve_errors(int join, double *pos, double *yaw, double *v, double *w) {
+  char err[300];
+  accel = 1;
+  assert_int_equal(nd_recorder_init(&rc, 1.0, DT, err, sizeof err), 0);
+  rc.join = join;
+  stream(600, 0, 0, 1);
+  const nd_rollout *r = NULL;
+  assert_int_equal(nd_recorder_finish(&rc, ND_OUTCOME_SUCCESS, &r, err, sizeof err), 0);
+  *pos = *yaw = *v = *w = 0;
+  for (int i = 10; i < r->n - 10; i++) {
+    const double *o = nd_rollout_obj(r, i), *p = nd_rollout_obj(r, i - 1);
+    const double t = DT * (i + 1), tm = t - 0.5 * DT;
+    *pos = fmax(*pos, fabs(o[0] - obj_x(t)));
+    *yaw = fmax(*yaw, fabs(nd_wrap_angle(nd_quat_yaw(o + 3) - obj_yaw(t))));
+    /* A difference over one step is the rate at its midpoint, for a quadratic exactly. */
+    *v = fmax(*v, fabs((o[0] - p[0]) / DT - (0.05 + 2 * tm)));
+    const double wi = nd_wrap_angle(nd_quat_yaw(o + 3) - nd_quat_yaw(p + 3)) / DT;
+    *w = fmax(*w, fabs(wi - (0.5 + 4 * tm)));
+  }
+  accel = 0;
+  nd_recorder_free(&rc);
+}
+
+/* The cubic follows an accelerating object between frames; a line gives each frame
+ * interval one rate, off by up to a h / 2 (4.2 mm/s and 8.3 mrad/s here). */
+static void test_interpolates_curves(void **state) {
+  (void)state;
+  double pos, yaw, v, w, lpos, lyaw, lv, lw;
+  curve_errors(ND_REC_JOIN_CUBIC, &pos, &yaw, &v, &w);
+  curve_errors(ND_REC_JOIN_LINE, &lpos, &lyaw, &lv, &lw);
+  printf("recorder_cubic_err_max %.3g m, yaw %.3g rad; rate %.3g m/s, yaw rate %.3g rad/s\n",
+         pos, yaw, v, w);
+  printf("recorder_line_err_max %.3g m, yaw %.3g rad; rate %.3g m/s, yaw rate %.3g rad/s\n",
+         lpos, lyaw, lv, lw);
+  assert_true(pos < 1e-12);  /* a quadratic is interpolated exactly */
+  assert_true(v < 1e-8);
+  assert_true(yaw < 1e-7);   /* yaw lies on the quaternion's circle: not quadratic */
+  assert_true(w < 1e-4);
+  assert_true(lv > 3e-3 && lv < 5e-3);  /* a h / 2 = 2 m/s^2 x 4.17 ms / 2 */
+  assert_true(lw > 6e-3 && lw < 1e-2);
 }
 
 /* Velocity records keep the end-effector velocity as the control. */
@@ -164,6 +214,7 @@ static void test_capacity(void **state) {
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_interpolates_and_fills),
+      cmocka_unit_test(test_interpolates_curves),
       cmocka_unit_test(test_velocity_control),
       cmocka_unit_test(test_refusals),
       cmocka_unit_test(test_capacity),

@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "nd_math.h"
+#include "nd_recorder.h"
 #include "nd_rng.h"
 #include "nd_snap.h"
 #include "nd_test.h"
@@ -450,13 +451,15 @@ static void test_replay_velocity(void **state) {
   nds_model_free(&nm);
 }
 
-/* r's object as motion capture would give it: frames at 240 Hz of src's poses with the
- * lab's noise (0.1 mm and 2e-3 rad per axis), interpolated to each step as nd_recorder
- * does (positions linearly, orientations by nd_quat_nlerp). */
-static void mocap_frames(const nd_rollout *src, nd_rng *g, nd_rollout *r) {
+/* r's object as motion capture would give it: frames at 240 Hz of src's poses, each taken
+ * at the step nearest its time, noise times the lab's noise (0.1 mm and 2e-3 rad per
+ * axis), joined to every step by nd_recorder_join as the recorder joins them. */
+static void mocap_frames(const nd_rollout *src, nd_rng *g, double noise, int join,
+                         nd_rollout *r) {
   const double fdt = 1.0 / 240;
   const int nf = (int)((src->n + 1) * src->dt / fdt) + 2;
   double(*fr)[7] = malloc(sizeof(*fr) * (size_t)nf);
+  int64_t *fus = malloc(sizeof(int64_t) * (size_t)nf), *tus = malloc(sizeof(int64_t) * r->n);
   for (int f = 0; f < nf; f++) {
     int k = (int)lround(f * fdt / src->dt) - 1;
     if (k >= src->n) k = src->n - 1;
@@ -466,19 +469,17 @@ static void mocap_frames(const nd_rollout *src, nd_rng *g, nd_rollout *r) {
     } else {
       memcpy(fr[f], nd_rollout_obj(src, k), 7 * sizeof(double));
     }
+    fus[f] = llround((k + 1) * src->dt * 1e6);
     double rv[3];
-    for (int a = 0; a < 3; a++) fr[f][a] += 1e-4 * nd_rng_normal(g), rv[a] = 2e-3 * nd_rng_normal(g);
+    for (int a = 0; a < 3; a++)
+      fr[f][a] += noise * 1e-4 * nd_rng_normal(g), rv[a] = noise * 2e-3 * nd_rng_normal(g);
     mju_quatIntegrate(fr[f] + 3, rv, 1);
   }
-  for (int k = 0; k < r->n; k++) {
-    const double t = (k + 1) * r->dt / fdt;
-    const int f = (int)t;
-    const double w = t - f;
-    double *o = nd_rollout_obj(r, k);
-    for (int a = 0; a < 3; a++) o[a] = (1 - w) * fr[f][a] + w * fr[f + 1][a];
-    nd_quat_nlerp(fr[f] + 3, fr[f + 1] + 3, w, o + 3);
-  }
+  for (int k = 0; k < r->n; k++) tus[k] = llround((k + 1) * r->dt * 1e6);
+  nd_recorder_join(fus, &fr[0][0], nf, join, tus, r->n, r->obj);
   free(fr);
+  free(fus);
+  free(tus);
 }
 
 /* Re-anchored every 0.1 s on motion capture's noisy frames, a replay under the truth
@@ -500,7 +501,7 @@ static void test_replay_anchor_fit(void **state) {
   for (int i = 0; i < NPUSH; i++) {
     nd_rollout r;
     rec_copy(&r, &push[i]);
-    mocap_frames(&push[i], &g, &r);
+    mocap_frames(&push[i], &g, 1.0, ND_REC_JOIN_LINE, &r);
     for (int j = 0; j < 2; j++) {
       rc.smooth = j ? 0.02 : 0;
       nds_replay_terms t;
@@ -522,6 +523,53 @@ static void test_replay_anchor_fit(void **state) {
   assert_int_equal(nds_replay(&nm, d, &rc, &push[0], &(nds_replay_terms){0}, NULL, err,
                               sizeof(err)), -1);
   assert_non_null(strstr(err, "smooth"));
+  mj_deleteData(d);
+  nds_model_free(&nm);
+}
+
+/* The three pushes as 240 Hz motion capture gives them, exact and with the lab's noise,
+ * joined by lines and by the cubic (doc/decisions.md#frames-per-world), replayed at torsions
+ * about the truth (force replay, 0.1 s windows). The frames' noise sets the loss, not the
+ * curve between them; the cubic's three-point rates average it over two frame intervals
+ * where a line's take one, and pass less of it on to the anchors. */
+static void test_replay_frames_join(void **state) {
+  (void)state;
+  nds_model nm;
+  nds_test_build(&nm, 0.001, NULL);
+  mjData *d = mj_makeData(nm.m);
+  nds_replay_cfg rc;
+  nds_replay_cfg_default(&rc, NDS_REPLAY_FORCE);
+  rc.window = 0.1;
+  char err[256];
+  enum { NT = 5 };
+  const double tor[NT] = {0.0025, 0.004, 0.005, 0.006, 0.01};
+  double L[2][2][NT] = {{{0}}};  /* [noise][join][torsion] */
+  for (int noisy = 0; noisy < 2; noisy++)
+    for (int join = 0; join < 2; join++) {
+      nd_rng g;
+      nd_rng_seed(&g, 7, 0);  /* the same noise for either join */
+      for (int i = 0; i < NPUSH; i++) {
+        nd_rollout r;
+        rec_copy(&r, &push[i]);
+        mocap_frames(&push[i], &g, noisy, join, &r);
+        for (int j = 0; j < NT; j++) {
+          const double th[ND_NTHETA] = {1, tor[j], 1e-4, 1};
+          assert_int_equal(nds_theta_apply(&nm, th, err, sizeof(err)), 0);
+          nds_replay_terms t;
+          assert_int_equal(nds_replay(&nm, d, &rc, &r, &t, NULL, err, sizeof(err)), 0);
+          L[noisy][join][j] += nds_replay_loss(&t, 1.0, 1e-3);
+        }
+        rec_free(&r);
+      }
+      printf("frames_join %s %-5s L at torsion", noisy ? "noisy" : "exact",
+             join ? "cubic" : "line");
+      for (int j = 0; j < NT; j++) printf(" %.4g: %.3e", tor[j], L[noisy][join][j]);
+      printf(" m^2\n");
+    }
+  for (int j = 0; j < NT; j++) {
+    assert_true(L[1][1][j] < 0.8 * L[1][0][j]);  /* noisy: the cubic's anchors are calmer */
+    for (int join = 0; join < 2; join++) assert_true(L[0][join][j] < 0.1 * L[1][join][j]);
+  }
   mj_deleteData(d);
   nds_model_free(&nm);
 }
@@ -1280,6 +1328,7 @@ int main(void) {
       cmocka_unit_test(test_replay_ratio),
       cmocka_unit_test(test_replay_velocity),
       cmocka_unit_test(test_replay_anchor_fit),
+      cmocka_unit_test(test_replay_frames_join),
       cmocka_unit_test(test_replay_anchor_stop),
       cmocka_unit_test(test_replay_phase),
       cmocka_unit_test(test_replay_bad_records),
