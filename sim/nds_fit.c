@@ -132,6 +132,14 @@ int nds_fit_cfg_check(const nds_fit_cfg *c, char *err, int errlen) {
     bad = "phases must be in [1, 16]";
   else if (c->phases > 1 && !(c->replay.window > 0 && c->robust == 0 && c->lm_iters == 0))
     bad = "phases > 1 needs replay.window > 0, robust 0 and lm_iters 0";
+  for (int i = 0; !bad && i < ND_NTHETA; i++) {
+    if (c->scan[i] == 0) continue;
+    if (c->scan[i] < 2 || c->scan[i] > NDS_FIT_MAX_SCAN || !c->fit[i])
+      bad = "scan needs 2..16 points and a fitted parameter, or 0";
+    else if (!(isfinite(c->scan_lo[i]) && isfinite(c->scan_hi[i]) &&
+               c->scan_lo[i] >= c->lower && c->scan_lo[i] < c->scan_hi[i]))
+      bad = "scan needs lower <= scan_lo < scan_hi, both finite";
+  }
   if (bad) {
     snprintf(err, errlen, "fit: %s", bad);
     return -1;
@@ -247,6 +255,7 @@ nds_fit *nds_fit_create(const nds_model *proto, const nds_fit_cfg *cfg, nd_pool 
     return NULL;
   }
   f->cand_cap = nd_cem_max_batch(f->cem) + 1;
+  if (f->cand_cap < NDS_FIT_MAX_SCAN + 1) f->cand_cap = NDS_FIT_MAX_SCAN + 1;
   /* nd_cem's elite count (nd_cem.c): a different count here would prune real elites or
    * prune less; test_replay checks that pruning changes no result. */
   f->nelite = (int)(cfg->elite_frac * cfg->pop + 0.5);
@@ -565,6 +574,39 @@ int nds_fit_score(nds_fit *f, const double theta[ND_NTHETA], const nd_rollout *r
   return eval_one(f, theta, rs, n, f->cfg.robust, score, per, err, errlen);
 }
 
+/* cfg.scan: for each scanned parameter, the mean and the mean with that parameter at each
+ * grid point in one batch (L, unpruned); the lowest L below the mean's moves the mean
+ * there, the std kept. Returns the parameters moved, or -1 when a replay failed. */
+static int scan(nds_fit *f) {
+  int moved = 0;
+  for (int j = 0; j < f->nfit; j++) {
+    const int i = f->idx[j], k = f->cfg.scan[i];
+    if (k < 2) continue;
+    double x[ND_NTHETA], loss[NDS_FIT_MAX_SCAN + 1];
+    memcpy(x, nd_cem_mean(f->cem), sizeof(double) * f->nfit);
+    nds_fit_to_theta(f, x, f->theta);
+    const double lo = f->cfg.scan_lo[i], hi = f->cfg.scan_hi[i];
+    for (int c = 1; c <= k; c++) {
+      const double s = (c - 1.0) / (k - 1.0);
+      double *th = f->theta + (size_t)ND_NTHETA * c;
+      memcpy(th, f->theta, sizeof(double) * ND_NTHETA);
+      th[i] = f->cfg.logfit[i] ? lo * pow(hi / lo, s) : lo + s * (hi - lo);
+    }
+    eval_batch(f, k + 1, 0, 0, loss);
+    if (f->task_err) return -1;
+    int best = 0;
+    for (int c = 1; c <= k; c++)
+      if (loss[c] < loss[best]) best = c;
+    if (best == 0) continue;
+    x[j] = nds_fit_x(f, j, f->theta[(size_t)ND_NTHETA * best + i]);
+    double xs[ND_NTHETA];
+    memcpy(xs, nd_cem_std(f->cem), sizeof(double) * f->nfit);
+    nd_cem_set_dist(f->cem, x, xs);
+    moved++;
+  }
+  return moved;
+}
+
 int nds_fit_run(nds_fit *f, const nd_rollout *rs, int n, nds_fit_out *out, char *err,
                 int errlen) {
   if (check_buffer(f, rs, n, err, errlen)) return -1;
@@ -586,10 +628,11 @@ int nds_fit_run(nds_fit *f, const nd_rollout *rs, int n, nds_fit_out *out, char 
     }
     nd_cem_set_dist(f->cem, m0, xs);
   }
+  const int moved = scan(f);
   f->cost_lo = INFINITY;
   f->cost_hi = -INFINITY;
   f->cost_cut = 0;
-  if (nd_cem_run(f->cem, &f->rng, cem_cost, f)) {
+  if (moved < 0 || nd_cem_run(f->cem, &f->rng, cem_cost, f)) {
     nd_cem_set_dist(f->cem, m0, s0);
     f->rng = r0;
     snprintf(err, errlen, "fit: a record could not be replayed");
@@ -602,6 +645,7 @@ int nds_fit_run(nds_fit *f, const nd_rollout *rs, int n, nds_fit_out *out, char 
 
   memset(out, 0, sizeof(*out));
   out->flat = flat;
+  out->scan_moved = flat ? 0 : moved;
   if (f->cfg.lm_iters > 0 && !flat) {
     double th[ND_NTHETA], sd[ND_NTHETA], xm[ND_NTHETA];
     nds_fit_dist(f, th, sd);

@@ -25,6 +25,7 @@
 
 #define NDS_FIT_MAX_ITERS 16
 #define NDS_FIT_MAX_PHASES 16
+#define NDS_FIT_MAX_SCAN 16
 
 /* Re-anchoring window, s, for records whose object pose was interpolated between
  * motion-capture frames (nudge-tasks: MOCAP at 240 Hz, steps at 1 kHz) rather than
@@ -74,6 +75,14 @@ typedef struct {
   double lm_fd;                /* its forward-difference step in units of sigma0: 0.5 by
                                   default, through the roughness contact events give the
                                   replays; records the model replays exactly take 0.02 */
+  int scan[ND_NTHETA];         /* 0, or >= 2 (at most NDS_FIT_MAX_SCAN) points spread
+                                  evenly over [scan_lo, scan_hi] (geometrically for a
+                                  logfit parameter) at which each run first scores the
+                                  mean with this parameter changed, one batch each; the
+                                  best moves the mean there when it beats it. CEM is local,
+                                  and a loss flat away from the truth holds it wherever it
+                                  starts (doc/decisions.md#scan). Fitted parameters only */
+  double scan_lo[ND_NTHETA], scan_hi[ND_NTHETA];  /* lower <= lo < hi where scan > 0 */
   uint64_t seed;
 } nds_fit_cfg;
 
@@ -118,6 +127,7 @@ typedef struct {
   double lm_cost0, lm_cost;    /* |r|^2 at CEM's mean and at the result */
   double lm_std[ND_NTHETA];
   double lm_inflation;         /* the correlation correction applied to the covariance */
+  int scan_moved;              /* parameters the scan moved the mean of (cfg.scan) */
 } nds_fit_out;
 
 typedef struct nds_fit nds_fit;

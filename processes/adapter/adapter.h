@@ -34,9 +34,11 @@ typedef struct {
   char history[ND_RFILE_PATH_MAX];
   unsigned fit;               /* bit i: theta[i] fitted */
   unsigned logfit;            /* bit i: theta[i] searched as ln theta */
+  unsigned scan;              /* bit i: theta[i] scanned over its prior's range (cfg.scan) */
   double theta[ND_NTHETA];    /* prior mean; value of held parameters */
   double ref[ND_NTHETA];      /* nominal theta the prior std is sized from */
   double D;                   /* prior uncertainty of the paper's formula */
+  int scan_points;            /* grid points per scanned parameter */
   int threads;
   uint64_t seed;
   int nice;

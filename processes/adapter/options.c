@@ -12,14 +12,24 @@ static int parse_fit(const char *v, const char *what, void *dst, char *err, int 
   return nd_theta_parse_mask(v, what, dst, err, errlen);
 }
 
+/* A parameter list, or none. */
+static int parse_list(const char *v, const char *what, void *dst, char *err, int errlen) {
+  if (!strcmp(v, "none")) {
+    *(unsigned *)dst = 0;
+    return 0;
+  }
+  return nd_theta_parse_mask(v, what, dst, err, errlen);
+}
+
 int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
   const char *history = NULL;
   nds_fit_cfg_default(fc);
   o->threads = ndp_default_threads();
   o->fit = 1u << ND_TH_SLIDE | 1u << ND_TH_TORSION | 1u << ND_TH_ROLL;
+  o->scan = 1u << ND_TH_TORSION;
   memcpy(o->theta, nd_theta_true, sizeof(o->theta));
   memcpy(o->ref, nd_theta_true, sizeof(o->ref));
-  o->D = 1.0, o->seed = 1, o->nice = 10;
+  o->D = 1.0, o->seed = 1, o->nice = 10, o->scan_points = 9;
   /* The recorded step: a coarser replay model biases the fit, whatever it saves in time
    * (doc/decisions.md#live-bias). */
   o->replay_dt = 0.001;
@@ -34,11 +44,19 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
       {"fit", ND_OPT_CUSTOM, &o->fit, .parse = parse_fit, .arg = "LIST", .def = "slide,torsion,roll",
        .help = "fitted parameters, comma-separated from slide, torsion, roll, mass; the others "
                "are held at --theta"},
-      {"log-fit", ND_OPT_CUSTOM, &o->logfit, .parse = parse_fit, .arg = "LIST", .def = "none",
+      {"log-fit", ND_OPT_CUSTOM, &o->logfit, .parse = parse_list, .arg = "LIST", .def = "none",
        .help = "fitted parameters searched as ln theta, with the paper's prior std taken of "
                "ln theta, ln((r + D r) / max(1e-7, r - D r)) / 16: for a prior that spans "
                "decades, as torsional friction started at 1; held parameters ignore it "
                "(doc/decisions.md#log-fit)"},
+      {"scan", ND_OPT_CUSTOM, &o->scan, .parse = parse_list, .arg = "LIST", .def = "torsion",
+       .help = "fitted parameters each refit first tries at --scan-points points spread "
+               "over the prior's range, max(1e-7, r - D r) to r + D r (geometrically with "
+               "--log-fit), the rest held at the mean; the best moves the mean there if it "
+               "beats it, for a loss too flat away from the truth for CEM's local steps "
+               "(doc/decisions.md#scan); held parameters ignore it; none: off"},
+      {"scan-points", ND_OPT_INT, &o->scan_points, 2, NDS_FIT_MAX_SCAN, .arg = "K",
+       .help = "points of --scan per parameter, each one replay of the buffer"},
       {"theta", ND_OPT_THETA, o->theta, .def = "the simulation's ground truth",
        .help = "prior mean: sliding, torsional, rolling friction, sphere mass in kg (give the "
                "planner's --theta to start the loop from a wrong model)"},
@@ -125,6 +143,11 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
     fc->fit[i] = o->fit >> i & 1;
     fc->mu0[i] = o->theta[i];
     fc->sigma0[i] = (r + D * r - fmax(fc->lower, r - D * r)) / 16;
+    if ((o->scan >> i & 1) && fc->fit[i]) {
+      fc->scan[i] = o->scan_points;
+      fc->scan_lo[i] = fmax(fc->lower, r - D * r);
+      fc->scan_hi[i] = r + D * r;
+    }
     if ((o->logfit >> i & 1) && fc->fit[i]) {
       /* nds_fit takes a log parameter's std as theta times the std of ln theta. */
       fc->logfit[i] = 1;

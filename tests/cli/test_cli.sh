@@ -199,6 +199,8 @@ bad nudge-adapter "--threads|out of range" --replay-window 0 --threads 0
 bad nudge-adapter "--fit|unknown parameter 'friction'" --fit slide,friction
 bad nudge-adapter "--fit|'slide' given twice" --fit slide,slide
 bad nudge-adapter "--fit|no parameter" --fit ,
+bad nudge-adapter "--scan|unknown parameter 'all'" --scan all
+bad nudge-adapter "--log-fit|'torsion' given twice" --log-fit torsion,torsion
 bad nudge-adapter "--buffer FILE is required"
 bad nudge-adapter "--history|empty value" --buffer x.nrb --history ''
 bad nudge-adapter "--prior-ref|slide is fitted|> 0" --buffer x.nrb --prior-ref 0,0.005,0.0001,1
@@ -414,7 +416,7 @@ args_are nudge-bridge --workspace "$LAB" --world lab
 args_are nudge-executor --workspace "$LAB" --v-max 0.5 --a-max 2.0
 args_are nudge-planner --workspace "$LAB" --v-max 0.45 --a-max 1.8 --segment-time 0.6 --arm panda --pop 16
 args_are nudge-tasks --record "$W/lab.nrb" --world lab --eps 1e-3 --record-control velocity
-args_are nudge-adapter --replay-mode velocity --fit slide,torsion,mass --buffer "$W/lab.nrb"
+args_are nudge-adapter --replay-mode velocity --fit slide,torsion,mass --scan none --buffer "$W/lab.nrb"
 rm -f "$W"/*.args
 "$FAKE/nudge-up" demo --world lab --workspace "$WS" --lcm-url memq:// --log-dir "$W/logs-lab2" \
   --buffer "$W/lab.nrb" --grace 2 --ready-timeout 5 >"$W/up-lab2.out" 2>"$W/up-lab2.err"

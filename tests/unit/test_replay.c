@@ -823,6 +823,62 @@ static void test_fit_recovers_sliding(void **state) {
   nd_pool_free(pool);
 }
 
+/* A torsional friction drawn far below the truth (0.0006 against 0.005, as the live
+ * study's low draws) with the paper's D = 1 std (0.000625). On these exact records the loss
+ * is a bowl and CEM's long steps climb it part of the way in one run (to ~0.003); the scan
+ * (9 points over (1e-7, 0.01], one replay of the buffer each) first puts the mean next to
+ * the truth, and CEM ends there. Live records are flat below ~0.003 (decisions#scan). */
+static void test_fit_scan(void **state) {
+  (void)state;
+  char err[256];
+  nd_pool *pool = nd_pool_create(2, err, sizeof(err));
+  assert_non_null(pool);
+  nds_model nm;
+  nds_test_build(&nm, 0.001, NULL);
+  double end[2];
+  int moved[2];
+  for (int on = 0; on < 2; on++) {
+    nds_fit_cfg cfg;
+    nds_fit_cfg_default(&cfg);
+    cfg.pop = 16;
+    cfg.iters = 2;
+    cfg.seed = 5;
+    cfg.fit[ND_TH_SLIDE] = cfg.fit[ND_TH_ROLL] = 0;
+    cfg.mu0[ND_TH_TORSION] = 0.0006;
+    cfg.sigma0[ND_TH_TORSION] = 0.01 / 16;
+    if (on) {
+      cfg.scan[ND_TH_TORSION] = 9;
+      cfg.scan_lo[ND_TH_TORSION] = 1e-7;
+      cfg.scan_hi[ND_TH_TORSION] = 0.01;
+    }
+    nds_fit *f = nds_fit_create(&nm, &cfg, pool, err, sizeof(err));
+    assert_non_null(f);
+    nds_fit_out out;
+    assert_int_equal(nds_fit_run(f, push, NPUSH, &out, err, sizeof(err)), 0);
+    end[on] = out.mean[ND_TH_TORSION];
+    moved[on] = out.scan_moved;
+    printf("%s: torsion 0.0006 -> %.4g (std %.3g), L(mean) %.3e, %d replays\n",
+           on ? "scan" : "no scan", end[on], out.std[ND_TH_TORSION], out.loss_mean, out.replays);
+    nds_fit_free(f);
+  }
+  assert_true(moved[0] == 0 && moved[1] == 1);
+  assert_true(fabs(end[1] - 0.005) < 0.0005);
+  assert_true(fabs(end[1] - 0.005) < 0.25 * fabs(end[0] - 0.005));
+
+  nds_fit_cfg bad;
+  nds_fit_cfg_default(&bad);
+  bad.scan[ND_TH_MASS] = 9;  /* held */
+  bad.scan_lo[ND_TH_MASS] = 0.5, bad.scan_hi[ND_TH_MASS] = 2;
+  assert_null(nds_fit_create(&nm, &bad, pool, err, sizeof(err)));
+  assert_non_null(strstr(err, "scan"));
+  nds_fit_cfg_default(&bad);
+  bad.scan[ND_TH_TORSION] = 9;  /* no range */
+  assert_null(nds_fit_create(&nm, &bad, pool, err, sizeof(err)));
+  assert_non_null(strstr(err, "scan_lo"));
+  nds_model_free(&nm);
+  nd_pool_free(pool);
+}
+
 /* A prior that spans decades: torsional friction started at 1 against the truth 0.005,
  * fitted alone. One refit (Q 16, C 2) over a linear std of 1/16 of the prior range only
  * starts down (step_std widens the std after the first step); searched as ln theta with
@@ -1336,6 +1392,7 @@ int main(void) {
       cmocka_unit_test(test_fit_recovers_sliding),
       cmocka_unit_test(test_fit_refine),
       cmocka_unit_test(test_fit_log_torsion),
+      cmocka_unit_test(test_fit_scan),
       cmocka_unit_test(test_fit_workers_identical),
       cmocka_unit_test(test_fit_flat_no_contact),
       cmocka_unit_test(test_fit_phases),
