@@ -182,7 +182,7 @@ static void cubic(const double *a, const double *ma, const double *b, const doub
 }
 
 void nd_recorder_join(const int64_t *frame_us, const double *frame, int nframes, int join,
-                    const int64_t *t, int n, double *obj) {
+                      const int64_t *t, int n, double *obj) {
   double a[ND_ROLLOUT_OBJ], b[ND_ROLLOUT_OBJ], ma[ND_ROLLOUT_OBJ], mb[ND_ROLLOUT_OBJ];
   int j = 0, seg = -1;
   for (int i = 0; i < n; i++) {
@@ -234,7 +234,7 @@ int nd_recorder_finish(nd_recorder *rc, int outcome, const nd_rollout **out, cha
   else {
     rc->r.outcome = outcome;
     nd_recorder_join(rc->frame_us, rc->frame, rc->nframes, rc->join, rc->step_us, rc->steps,
-                   rc->r.obj);
+                     rc->r.obj);
     rc->r.n = rc->steps;
     *out = &rc->r;
     return 0;

@@ -96,6 +96,6 @@ int nd_recorder_finish(nd_recorder *rc, int outcome, const nd_rollout **out, cha
  * at frame_us (increasing), joined as join (ND_REC_JOIN_*) says, held beyond the first
  * and last frame. */
 void nd_recorder_join(const int64_t *frame_us, const double *frame, int nframes, int join,
-                    const int64_t *t, int n, double *obj);
+                      const int64_t *t, int n, double *obj);
 
 #endif

@@ -134,8 +134,8 @@ int tasks_options(int argc, char **argv, tasks_cfg *c) {
   if (c->await_fit > 0 && !c->record)
     return nd_opt_fail(&spec, "--await-fit needs --record (it waits for the fit of a record)");
   if (world == 1 && !nd_opt_find(&spec, "tau")->given) c->tau = 8.0;
-  if (world == 1 && !nd_opt_find(&spec, "record-frames")->given) c->record_join = ND_REC_JOIN_LINE;
-
+  if (world == 1 && !nd_opt_find(&spec, "record-frames")->given)
+    c->record_join = ND_REC_JOIN_LINE;
   if (c->n == 0 && world == 1) {
     c->n = (int)(sizeof(chain_lab) / sizeof(chain_lab[0]));
     memcpy(c->goals, chain_lab, sizeof(chain_lab));

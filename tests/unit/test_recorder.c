@@ -1,6 +1,6 @@
 /* test_recorder: a rollout from sensor streams (core/nd_recorder.c): object frames
- * interpolated to the steps by lines and by a cubic, lost states filled, and the tasks that must not be recorded
- * refused with the reason. */
+ * interpolated to the steps by lines and by a cubic, lost states filled, and the tasks
+ * that must not be recorded refused with the reason. */
 #include <string.h>
 
 #include "nd_test.h"
