@@ -114,12 +114,23 @@ int ndp_status_tick(lcm_t *lcm, ndp_status *st, int force) {
   return 1;
 }
 
-void ndp_refused(ndp_ratelog *rl, const char *prog, const char *what, const char *why) {
+/* Count one event; 1 if its line is due. */
+static int ratelog_due(ndp_ratelog *rl) {
   const double now = ndp_mono();
   rl->count++;
-  if (rl->count > NDP_RATELOG_FIRST && now < rl->next) return;
-  fprintf(stderr, "%s: refused %s: %s (%lld so far)\n", prog, what, why, (long long)rl->count);
+  if (rl->count > NDP_RATELOG_FIRST && now < rl->next) return 0;
   if (rl->count >= NDP_RATELOG_FIRST) rl->next = now + NDP_RATELOG_EVERY;
+  return 1;
+}
+
+void ndp_refused(ndp_ratelog *rl, const char *prog, const char *what, const char *why) {
+  if (ratelog_due(rl))
+    fprintf(stderr, "%s: refused %s: %s (%lld so far)\n", prog, what, why, (long long)rl->count);
+}
+
+void ndp_lost(ndp_ratelog *rl, const char *prog, const char *what) {
+  if (ratelog_due(rl))
+    fprintf(stderr, "%s: lost %s (%lld so far)\n", prog, what, (long long)rl->count);
 }
 
 int ndp_decode_why(int status, int size, const char *type, char *why, int len) {

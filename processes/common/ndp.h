@@ -96,6 +96,9 @@ typedef struct {
 /* Count one refusal and print "<prog>: refused <what>: <why> (<count> so far)" if due. */
 void ndp_refused(ndp_ratelog *rl, const char *prog, const char *what, const char *why);
 
+/* Count one loss of input and print "<prog>: lost <what> (<count> so far)" if due. */
+void ndp_lost(ndp_ratelog *rl, const char *prog, const char *what);
+
 /* Typed input without lcm-gen's subscribe wrapper, which prints a line to stderr for each
  * message that does not decode and drops it uncounted (a flood of garbage then grows the
  * logs without bound). NDP_TYPED_HANDLER(T, name, handler, bad) defines

@@ -158,8 +158,11 @@ int planner_subscribe(planner_proc *p, char *err, int errlen) {
 }
 
 void planner_drained(planner_proc *p) {
-  p->overflows += ndp_input_drained(&p->in_mocap) + ndp_input_drained(&p->in_rs) +
-                  ndp_input_drained(&p->in_cmd);
+  const int n = ndp_input_drained(&p->in_mocap) + ndp_input_drained(&p->in_rs) +
+                ndp_input_drained(&p->in_cmd);
+  p->overflows += n;
+  /* Said at once, not only in the task's summary: what came after is gone. */
+  if (n) ndp_lost(&p->lost, PROG, "the newest input: a queue filled while a plan ran");
 }
 
 /* 1 if a plan may start now: mocap and robot state fresh, and the setpoint not known to

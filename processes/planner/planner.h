@@ -86,6 +86,7 @@ typedef struct {
   int64_t plan_id;
   int64_t last_start_utime;    /* when the last plan started (nds_planner_retime) */
   ndp_ratelog rejected;        /* rate-limited log of refused inputs */
+  ndp_ratelog lost;            /* rate-limited log of queue overflows */
 } planner_proc;
 
 /* Count a refused input in the heartbeat and log it, rate-limited. */
