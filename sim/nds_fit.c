@@ -88,7 +88,6 @@ void nds_fit_cfg_default(nds_fit_cfg *cfg) {
   cfg->lm_fd = NDS_FIT_LM_FD;
   cfg->prune = 1;
   cfg->phases = 1;
-  cfg->scan_phases = 1;
   nds_replay_cfg_default(&cfg->replay, NDS_FIT_MODE_DEFAULT);
   cfg->replay.window = NDS_FIT_WINDOW;
   cfg->step_std = NDS_FIT_STEP_STD;
@@ -133,10 +132,6 @@ int nds_fit_cfg_check(const nds_fit_cfg *c, char *err, int errlen) {
     bad = "phases must be in [1, 16]";
   else if (c->phases > 1 && !(c->replay.window > 0 && c->robust == 0 && c->lm_iters == 0))
     bad = "phases > 1 needs replay.window > 0, robust 0 and lm_iters 0";
-  else if (c->scan_phases < 1 || c->scan_phases > NDS_FIT_MAX_PHASES)
-    bad = "scan_phases must be in [1, 16]";
-  else if (c->scan_phases > 1 && !(c->replay.window > 0))
-    bad = "scan_phases > 1 needs replay.window > 0";
   for (int i = 0; !bad && i < ND_NTHETA; i++) {
     if (c->scan[i] == 0) continue;
     if (c->scan[i] < 2 || c->scan[i] > NDS_FIT_MAX_SCAN || !c->fit[i])
@@ -415,7 +410,7 @@ static void replay_task(void *ctx, int task, int worker) {
       out->pos_o = out->pos_ee = out->rot_o = out->robust = NDS_REPLAY_DIVERGED;
       out->diverged = 1;
     } else {
-      const int ph = f->ph;
+      const int ph = f->cfg.phases;
       nds_replay_cfg rc = f->cfg.replay;
       rc.phase = (r % ph) * rc.window / ph;
       if (nds_replay_bounded(nm, f->data[worker], &rc, &f->rs[r / ph], f->cfg.k1, f->cfg.k2,
@@ -508,7 +503,7 @@ static void eval_batch(nds_fit *f, int ncand, int prune, double robust, double *
   for (int c = 0; c < ncand; c++) {
     double L = 0;
     for (int r = 0; r < f->nr; r++) L += score(f, &f->terms[(size_t)c * f->nr + r]);
-    loss[c] = f->cut[c] ? INFINITY : L / f->ph;
+    loss[c] = f->cut[c] ? INFINITY : L / f->cfg.phases;
   }
 }
 
@@ -539,9 +534,7 @@ static int check_buffer(nds_fit *f, const nd_rollout *rs, int n, char *err, int 
       return -1;
     }
   }
-  return reserve(f, n * (f->cfg.phases > f->cfg.scan_phases ? f->cfg.phases
-                                                             : f->cfg.scan_phases),
-                 err, errlen);
+  return reserve(f, n * f->cfg.phases, err, errlen);
 }
 
 /* nds_fit_loss and nds_fit_score: theta alone, scored with robust. */
@@ -551,7 +544,6 @@ static int eval_one(nds_fit *f, const double theta[ND_NTHETA], const nd_rollout 
   if (nd_theta_check(theta, err, errlen) || check_buffer(f, rs, n, err, errlen)) return -1;
   const int ph = f->cfg.phases;
   f->rs = rs;
-  f->ph = ph;
   f->nr = n * ph;
   f->task_err = 0;
   memcpy(f->theta, theta, sizeof(double) * ND_NTHETA);
@@ -619,6 +611,7 @@ int nds_fit_run(nds_fit *f, const nd_rollout *rs, int n, nds_fit_out *out, char 
                 int errlen) {
   if (check_buffer(f, rs, n, err, errlen)) return -1;
   f->rs = rs;
+  f->nr = n * f->cfg.phases;
   f->task_err = 0;
   f->nrun = 0;
 
@@ -635,11 +628,7 @@ int nds_fit_run(nds_fit *f, const nd_rollout *rs, int n, nds_fit_out *out, char 
     }
     nd_cem_set_dist(f->cem, m0, xs);
   }
-  f->ph = f->cfg.scan_phases;
-  f->nr = n * f->ph;
   const int moved = scan(f);
-  f->ph = f->cfg.phases;
-  f->nr = n * f->ph;
   f->cost_lo = INFINITY;
   f->cost_hi = -INFINITY;
   f->cost_cut = 0;

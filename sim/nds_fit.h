@@ -83,12 +83,6 @@ typedef struct {
                                   and a loss flat away from the truth holds it wherever it
                                   starts (doc/decisions.md#scan). Fitted parameters only */
   double scan_lo[ND_NTHETA], scan_hi[ND_NTHETA];  /* lower <= lo < hi where scan > 0 */
-  int scan_phases;             /* >= 1: the scan scores each point over this many anchor
-                                  phases, as phases does for CEM: a grid point's L from one
-                                  set of anchors carries that set's contact chaos, which
-                                  near the truth outweighs the grid's differences
-                                  (doc/decisions.md#scan-phases). More than 1 needs a
-                                  window. Default 1 */
   uint64_t seed;
 } nds_fit_cfg;
 

@@ -29,9 +29,8 @@ struct nds_fit {
 
   /* The current batch, read by the tasks. */
   const nd_rollout *rs;
-  int ph;               /* phases of the current batch: cfg.phases, or the scan's */
-  int nr;               /* replays per candidate: rollouts x ph; replay i is rollout
-                         * i / ph at phase i % ph */
+  int nr;               /* replays per candidate: rollouts x cfg.phases; replay i is
+                         * rollout i / phases at phase i % phases */
   int task_err;         /* a task could not replay (only on a record changed under us) */
 
   /* Pruning (cfg.prune): a candidate is dropped once the L of its finished and running

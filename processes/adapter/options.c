@@ -57,11 +57,6 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
                "(doc/decisions.md#scan); held parameters ignore it; none: off"},
       {"scan-points", ND_OPT_INT, &o->scan_points, 2, NDS_FIT_MAX_SCAN, .arg = "K",
        .help = "points of --scan per parameter, each one replay of the buffer"},
-      {"scan-phases", ND_OPT_INT, &fc->scan_phases, 1, NDS_FIT_MAX_PHASES, .arg = "P",
-       .help = "score each --scan point over P anchor phases, as --replay-phases does for "
-               "CEM, at P times the scan's replays: one set of anchors' contact chaos "
-               "outweighs the grid's differences near the truth "
-               "(doc/decisions.md#scan-phases; needs a --replay-window)"},
       {"theta", ND_OPT_THETA, o->theta, .def = "the simulation's ground truth",
        .help = "prior mean: sliding, torsional, rolling friction, sphere mass in kg (give the "
                "planner's --theta to start the loop from a wrong model)"},
@@ -137,9 +132,6 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
   if (fc->phases > 1 && !(o->replay_window > 0 && o->robust == 0 && fc->lm_iters == 0))
     return nd_opt_fail(&spec, "--replay-phases %d needs --replay-window above 0 and neither "
                        "--robust nor --lm-iters", fc->phases);
-  if (fc->scan_phases > 1 && !(o->replay_window > 0))
-    return nd_opt_fail(&spec, "--scan-phases %d needs --replay-window above 0",
-                       fc->scan_phases);
   for (int i = 0; i < ND_NTHETA; i++) {
     /* The paper's width vanishes for a nominal value of 0. */
     if ((o->fit >> i & 1) && !(o->ref[i] > 0.0))

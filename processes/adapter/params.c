@@ -146,14 +146,14 @@ void adapter_banner(const adapter *a, const nds_fit *fit, const nds_fit_cfg *fc,
   fprintf(stderr,
           PROG ": buffer %s, history %s (%lld entries%s), fit %s, CEM Q %d C %d rho %.2g, "
           "prior D %g on (%g, %g, %g, %g), %s (%.4g, %.4g, %.4g, %.4g) std (%.3g, %.3g, %.3g, "
-          "%.3g), replay %s dt %g s window %g s x %d phase(s), scan %s (%d points x %d "
-          "phase(s)), ranked by %s, LM %d iterations, %d worker(s), nice %d, %s\n",
+          "%.3g), replay %s dt %g s window %g s x %d phase(s), scan %s (%d points), ranked by %s, "
+          "LM %d iterations, %d worker(s), nice %d, %s\n",
           o->buffer, o->history, (long long)hs->entries, hs->have_last ? ", resuming" : "",
           fitted, fc->pop, fc->iters, fc->elite_frac, o->D, o->ref[0], o->ref[1], o->ref[2],
           o->ref[3], hs->have_last ? "from version" : "prior", m0[0], m0[1], m0[2], m0[3],
           s0[0], s0[1], s0[2], s0[3], nds_replay_mode_name(fc->replay.mode), o->replay_dt,
-          fc->replay.window, fc->phases, scanned, o->scan_points, fc->scan_phases, rank,
-          fc->lm_iters, o->threads, o->nice, ndp_url(o->url));
+          fc->replay.window, fc->phases, scanned, o->scan_points, rank, fc->lm_iters, o->threads,
+          o->nice, ndp_url(o->url));
   if (hs->have_last)
     fprintf(stderr, PROG ": resuming after version %lld (fit on %d rollout(s) of the buffer "
             "created %lld us)\n", (long long)hs->last.version, (int)hs->last.buffer_size,

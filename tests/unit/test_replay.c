@@ -835,15 +835,14 @@ static void test_fit_scan(void **state) {
   assert_non_null(pool);
   nds_model nm;
   nds_test_build(&nm, 0.001, NULL);
-  double end[3];
-  int moved[3], replays[3];
-  for (int on = 0; on < 3; on++) {
+  double end[2];
+  int moved[2];
+  for (int on = 0; on < 2; on++) {
     nds_fit_cfg cfg;
     nds_fit_cfg_default(&cfg);
     cfg.pop = 16;
     cfg.iters = 2;
     cfg.seed = 5;
-    cfg.prune = 0;  /* replay counts independent of timing; results are the same */
     cfg.fit[ND_TH_SLIDE] = cfg.fit[ND_TH_ROLL] = 0;
     cfg.mu0[ND_TH_TORSION] = 0.0006;
     cfg.sigma0[ND_TH_TORSION] = 0.01 / 16;
@@ -851,7 +850,6 @@ static void test_fit_scan(void **state) {
       cfg.scan[ND_TH_TORSION] = 9;
       cfg.scan_lo[ND_TH_TORSION] = 1e-7;
       cfg.scan_hi[ND_TH_TORSION] = 0.01;
-      cfg.scan_phases = on;  /* 2: each point over two anchor phases */
     }
     nds_fit *f = nds_fit_create(&nm, &cfg, pool, err, sizeof(err));
     assert_non_null(f);
@@ -859,20 +857,13 @@ static void test_fit_scan(void **state) {
     assert_int_equal(nds_fit_run(f, push, NPUSH, &out, err, sizeof(err)), 0);
     end[on] = out.mean[ND_TH_TORSION];
     moved[on] = out.scan_moved;
-    replays[on] = out.replays;
-    printf("%s%.0d: torsion 0.0006 -> %.4g (std %.3g), L(mean) %.3e, %d replays\n",
-           on ? "scan, phases " : "no scan", on, end[on], out.std[ND_TH_TORSION],
-           out.loss_mean, out.replays);
+    printf("%s: torsion 0.0006 -> %.4g (std %.3g), L(mean) %.3e, %d replays\n",
+           on ? "scan" : "no scan", end[on], out.std[ND_TH_TORSION], out.loss_mean, out.replays);
     nds_fit_free(f);
   }
-  assert_true(moved[0] == 0 && moved[1] == 1 && moved[2] == 1);
-  for (int on = 1; on < 3; on++) {
-    assert_true(fabs(end[on] - 0.005) < 0.0005);
-    assert_true(fabs(end[on] - 0.005) < 0.25 * fabs(end[0] - 0.005));
-  }
-  /* The second phase replays the buffer once more for the mean and each of the 9 points
-   * (unpruned, so CEM's count is the same in both). */
-  assert_int_equal(replays[2], replays[1] + 10 * NPUSH);
+  assert_true(moved[0] == 0 && moved[1] == 1);
+  assert_true(fabs(end[1] - 0.005) < 0.0005);
+  assert_true(fabs(end[1] - 0.005) < 0.25 * fabs(end[0] - 0.005));
 
   nds_fit_cfg bad;
   nds_fit_cfg_default(&bad);
@@ -884,11 +875,6 @@ static void test_fit_scan(void **state) {
   bad.scan[ND_TH_TORSION] = 9;  /* no range */
   assert_null(nds_fit_create(&nm, &bad, pool, err, sizeof(err)));
   assert_non_null(strstr(err, "scan_lo"));
-  nds_fit_cfg_default(&bad);
-  bad.scan_phases = 2;
-  bad.replay.window = 0;  /* phases need anchors to shift */
-  assert_null(nds_fit_create(&nm, &bad, pool, err, sizeof(err)));
-  assert_non_null(strstr(err, "scan_phases"));
   nds_model_free(&nm);
   nd_pool_free(pool);
 }
