@@ -65,8 +65,6 @@ void nds_planner_cfg_default(nds_planner_cfg *cfg) {
   cfg->w = nd_cost_weights_default();
   nds_ctrl_cfg_default(&cfg->ctrl);
   cfg->free_flight = 1;
-  cfg->fine_dist = 0.0;
-  cfg->fine_min = 0.25;
   /* At the limit itself: the lab's box and Cartesian limits already keep to 0.87 of the
    * joint velocity and 0.9 of the acceleration limits from rest; a margin below that
    * slowed the lab pushes (doc/decisions.md#arm-aware, #velocity-product). */
@@ -213,11 +211,6 @@ nds_planner *nds_planner_create(const nds_model *model, const nds_planner_cfg *c
              cfg->a_max);
     return NULL;
   }
-  if (!(cfg->fine_dist >= 0.0) || !(cfg->fine_min > 0.0 && cfg->fine_min <= 1.0)) {
-    snprintf(err, errlen, "planner: need fine_dist >= 0 and 0 < fine_min <= 1 (got %g, %g)",
-             cfg->fine_dist, cfg->fine_min);
-    return NULL;
-  }
   nds_planner *p = calloc(1, sizeof(*p));
   if (!p) {
     snprintf(err, errlen, "planner: out of memory");
@@ -337,13 +330,6 @@ int nds_planner_plan(nds_planner *p, const nds_state *s, const double sp0[2][4],
     snprintf(err, errlen, "planner: state, setpoint or goal is not finite");
     return -1;
   }
-  double std[4 * ND_MAX_KEYS];
-  double f = 1.0;
-  if (c->fine_dist > 0) {
-    const double d = hypot(s->obj_pos[0] - g[0], s->obj_pos[1] - g[1]);
-    f = fmax(c->fine_min, fmin(1.0, d / c->fine_dist));
-  }
-  for (int i = 0; i < p->dim; i++) std[i] = f * p->std0[i];
   if (!p->warm) {
     /* Cold start: every keypoint at the current setpoint, at rest. The proximity term
      * draws the samples toward the object from there. */
@@ -353,14 +339,14 @@ int nds_planner_plan(nds_planner *p, const nds_state *s, const double sp0[2][4],
       mean[4 * k + 1] = sp0[1][0];
       mean[4 * k + 2] = mean[4 * k + 3] = 0.0;
     }
-    nd_cem_set_dist(p->cem, mean, std);
+    nd_cem_set_dist(p->cem, mean, p->std0);
     p->warm = 1;
   } else {
     /* Re-plans come every 25-100 ms while a segment lasts 0.3-0.6 s: the previous plan's
      * keypoints are still ahead, so the mean keeps them (moved along their path by
      * nds_planner_retime where the caller knows when plans start) and only the std is
      * widened again. */
-    nd_cem_shift(p->cem, 0, std);
+    nd_cem_shift(p->cem, 0, p->std0);
   }
   memcpy(p->last_sp0, sp0, sizeof(p->last_sp0));
   p->s = s;

@@ -34,10 +34,6 @@ typedef struct {
   double reach_max;         /* load allowed (nds_reach_load), 1 by default */
   int redraws;              /* a fresh candidate beyond the limits is drawn again up to this
                              * many times (nd_cem_cfg.redraws); 0 by default */
-  double fine_dist, fine_min; /* coarse to fine: each plan's std is std_init times
-                             * clamp(d / fine_dist, fine_min, 1), d the object's distance to
-                             * the goal, so the last centimetres are searched at their own
-                             * scale; fine_dist 0: off, the default */
   uint64_t seed;
 } nds_planner_cfg;
 

@@ -72,11 +72,6 @@ int main(int argc, char **argv) {
        .help = "draw a candidate beyond the limits (Cartesian or the arm's) again up to this "
                "many times before it is scored: sampling truncated to what the robot can do, "
                "so more of N is simulated where the limits are low"},
-      {"fine-dist", ND_OPT_DOUBLE, &pc.fine_dist, 0, 1, .arg = "D",
-       .help = "coarse to fine: the sampling std shrinks with the object's distance to the "
-               "goal below D m, to --fine-min of itself (0: off)"},
-      {"fine-min", ND_OPT_DOUBLE, &pc.fine_min, 0.05, 1, .arg = "F",
-       .help = "the smallest share of the sampling std --fine-dist leaves"},
       {"segment-time", ND_OPT_DOUBLE, &pc.T, 0.05, 2.0, .arg = "S",
        .help = "duration of each keypoint's minimum-snap segment (the horizon is M times it); "
                "slower arms need longer ones to move as far"},
