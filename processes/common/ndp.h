@@ -83,9 +83,9 @@ void ndp_status_init(ndp_status *st, const char *name);
  * published, 0 if not due, -1 on a publish error. */
 int ndp_status_tick(lcm_t *lcm, ndp_status *st, int force);
 
-/* Rate-limited refusal messages: the first NDP_RATELOG_FIRST of one kind, then at most one
- * every NDP_RATELOG_EVERY s, each with the running count, so a flood of bad input cannot
- * flood stderr. Zero-initialise one per kind of refusal; count is every refusal seen. */
+/* Rate-limited lines about input, refused or lost: the first NDP_RATELOG_FIRST of one kind,
+ * then at most one every NDP_RATELOG_EVERY s, each with the running count, so a flood of bad
+ * input cannot flood stderr. Zero-initialise one per kind; count is every event seen. */
 #define NDP_RATELOG_FIRST 5
 #define NDP_RATELOG_EVERY 10.0
 typedef struct {

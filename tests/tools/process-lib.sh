@@ -317,8 +317,10 @@ pt_cleanup() {
     ((q == 1 || q == $$)) && continue
     kill -KILL "$q" 2>/dev/null && pt_say "cleanup: killed leftover process $q"
   done
-  [[ -n ${NETNS_RUN_INSIDE:-} && -n ${PT_WORK:-} && -d $PT_WORK ]] &&
-    pt_figure udp_rcvbuf_drops "$(pt_udp_drops)" count
+  local drops
+  drops=$(pt_udp_drops)
+  [[ -n ${NETNS_RUN_INSIDE:-} && -n $drops && -n ${PT_WORK:-} && -d $PT_WORK ]] &&
+    pt_figure udp_rcvbuf_drops "$drops" count
   # Everything has stopped now, so every leak report has been written.
   if [[ -n ${PT_WORK:-} && -d $PT_WORK ]]; then
     pt_sanitizer_scan "$PT_WORK" && pt_ok "no sanitizer report in the logs"
