@@ -73,6 +73,7 @@ static void use_task(void *user, const nudge_task_t *m) {
   if (p->active) planner_task_summary(p, "superseded");
   p->task = *m;
   p->active = 1;
+  p->release_due = 0;
   p->task_t0 = ndp_mono();
   p->task_plans = 0;
   p->task_ms_sum = p->task_ms_max = p->task_stale = 0.0;
@@ -103,6 +104,7 @@ static void on_episode(const lcm_recv_buf_t *rb, const char *ch, void *user) {
     p->ended_id = m.task_id;
     if (p->active && m.task_id == p->task.task_id) {
       p->active = 0;
+      p->release_due = 1;
       planner_task_summary(p, m.event == NUDGE_EPISODE_T_EVENT_SUCCESS   ? "succeeded"
                               : m.event == NUDGE_EPISODE_T_EVENT_TIMEOUT ? "timed out"
                               : m.event == NUDGE_EPISODE_T_EVENT_STOPPED ? "ended in a reflex stop"

@@ -12,7 +12,7 @@
 
 int main(int argc, char **argv) {
   planner_opts o = {.threads = ndp_default_threads(), .pop = 20, .iters = 2, .seed = 1,
-                    .max_rate = 40.0, .state_timeout = 0.1, .lead = 1};
+                    .max_rate = 40.0, .state_timeout = 0.1, .lead = 1, .release = 0.01};
   static const char *const lead_words[] = {"off", "on", NULL};
   static const char *const arm_words[] = {"none", "panda", NULL};
   int arm = 0;
@@ -72,6 +72,10 @@ int main(int argc, char **argv) {
        .help = "draw a candidate beyond the limits (Cartesian or the arm's) again up to this "
                "many times before it is scored: sampling truncated to what the robot can do, "
                "so more of N is simulated where the limits are low"},
+      {"release", ND_OPT_DOUBLE, &o.release, 0.0, 0.1, .arg = "M",
+       .help = "when a task ends, one last plan brings the sphere to rest this far clear of "
+               "the object's sides (where it is, if it already is): held pressing on it, the "
+               "object would creep on into the next task"},
       {"segment-time", ND_OPT_DOUBLE, &pc.T, 0.05, 2.0, .arg = "S",
        .help = "duration of each keypoint's minimum-snap segment (the horizon is M times it); "
                "slower arms need longer ones to move as far"},
@@ -128,6 +132,9 @@ int main(int argc, char **argv) {
   nd_objest_cfg ec;
   nd_objest_cfg_default(&ec, pc.v_max, pc.v_max / fmin(pm.cfg.obj_half[0], pm.cfg.obj_half[1]));
   nd_objest_init(&p.est, &ec);
+  p.obj_half[0] = pm.cfg.obj_half[0];
+  p.obj_half[1] = pm.cfg.obj_half[1];
+  p.ee_radius = pm.cfg.ee_radius;
 
   fprintf(stderr,
           PROG ": %s, iCEM N %d C %d, M %d, T %.2f s, plan dt %.4f s (%s contact), %d worker(s), max %.1f "
@@ -156,6 +163,7 @@ int main(int argc, char **argv) {
     now = ndp_mono();
     if (!p.active) {
       p.st.state = "idle";
+      if (p.release_due && planner_release(&p, now, err, sizeof(err))) goto done;
     } else if (!planner_state_fresh(&p, now)) {
       p.st.state = "stale";
       p.task_stale += now - last;

@@ -1,10 +1,13 @@
-/* plan: one plan from the newest inputs, published on PLAN (planner.h). */
+/* plan: one plan from the newest inputs, and the release after a task, published on PLAN
+ * (planner.h). */
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
 
 #include "nd_cost.h"
 #include "nd_exec.h"
+#include "nd_math.h"
+#include "nd_release.h"
 #include "planner.h"
 
 /* Plan from the newest inputs and publish. Return 0, or -1 with a message (LCM failure). */
@@ -133,3 +136,43 @@ int planner_plan_once(planner_proc *p, double now, char *err, int errlen) {
   return 0;
 }
 
+
+int planner_release(planner_proc *p, double now, char *err, int errlen) {
+  const planner_opts *o = p->o;
+  if (!ndp_input_fresh(&p->in_mocap, now, o->state_timeout) ||
+      !ndp_input_fresh(&p->in_rs, now, o->state_timeout))
+    return 0;
+  p->release_due = 0;
+  const nds_planner_cfg *pc = nds_planner_config(p->planner);
+  const double yaw = nd_quat_yaw(p->mocap.obj_quat);
+  const nd_release_box b = {.x = p->mocap.obj_pos[0], .y = p->mocap.obj_pos[1], .yaw = yaw,
+                            .half = {p->obj_half[0], p->obj_half[1]}};
+  double key[2];
+  const double moved = nd_release_target(&b, p->ee_radius, o->release, p->rs.ee_pos, pc->ws_lo,
+                                         pc->ws_hi, key);
+  const int cmd_ok = ndp_input_fresh(&p->in_cmd, now, o->state_timeout);
+  nudge_plan_t m;
+  memset(&m, 0, sizeof(m));
+  m.utime = ndp_utime();
+  m.plan_id = ++p->plan_id;
+  m.task_id = p->task.task_id;
+  m.state_utime = p->mocap.utime;
+  for (int k = 0; k < 2; k++) m.start_p[k] = cmd_ok ? p->cmd.p[k] : p->rs.ee_pos[k];
+  m.M = 1;
+  m.keypoints[0][0] = key[0];
+  m.keypoints[0][1] = key[1];
+  m.T = PLANNER_RELEASE_T;
+  m.predicted[0] = b.x;
+  m.predicted[1] = b.y;
+  m.predicted[2] = yaw;
+  m.theta_version = p->theta_version;
+  if (nudge_plan_t_publish(p->lcm, NDP_CH_PLAN, &m) != 0) {
+    snprintf(err, errlen, "publishing on %s failed", NDP_CH_PLAN);
+    return -1;
+  }
+  p->st.published++;
+  fprintf(stderr, PROG ": task %lld: released: the sphere rests at (%+.3f, %+.3f) m, %.1f mm "
+          "out, at least %g m clear of the object\n", (long long)p->task.task_id, key[0], key[1],
+          1e3 * moved, o->release);
+  return 0;
+}

@@ -2,11 +2,12 @@
  *
  *   main.c    options and wiring: models, pool, LCM, the plan loop
  *   inputs.c  the input channels: validation, the newest of each, the task in hand
- *   plan.c    one plan from the newest inputs, published on PLAN
+ *   plan.c    one plan from the newest inputs, and the release, published on PLAN
  *
  * The process keeps the newest world state from MOCAP (object pose) and ROBOT_STATE
  * (end-effector), the executor's setpoint from EE_CMD, the goal from TASK and theta from
- * PARAMS. While a task is active and the state is fresh it plans back to back. Planning
+ * PARAMS. While a task is active and the state is fresh it plans back to back; when the
+ * task ends, one release plan takes the sphere clear of the object. Planning
  * runs in the main thread between LCM drains: it is not a 1 kHz process, and the queues
  * are sized so a plan's duration of input fits in them. */
 #ifndef PLANNER_H
@@ -30,6 +31,7 @@ typedef struct {
   double theta[ND_NTHETA];
   nd_box ws;             /* keypoint box, m */
   int lead;              /* 1: plans start when they reach the executor (PLANNER_LEAD_*) */
+  double release;        /* m the sphere rests clear of the object after a task */
 } planner_opts;
 
 /* Latency compensation: a plan starts lead seconds after planning begins, predicted from
@@ -43,6 +45,8 @@ typedef struct {
  * once per task: the sphere cannot get behind it to push it back. */
 #define PLANNER_EDGE_WARN 0.005
 #define PLANNER_PRE_MAX 256
+/* The release's segment duration, s: the executor lengthens it as its limits need. */
+#define PLANNER_RELEASE_T 0.1
 
 /* Niceness the planning threads add to the process's: below its LCM receive thread. */
 #define PLANNER_COMPUTE_NICE 5
@@ -78,6 +82,8 @@ typedef struct {
   int64_t task_rollouts, task_redrawn; /* candidates simulated, and fresh draws drawn again */
   double task_stale;           /* s of the task spent without fresh state */
   int edge_warned;             /* the task's object was logged beyond the sphere's reach */
+  int release_due;             /* the task ended: one PLAN sends the sphere clear (nd_release) */
+  double obj_half[2], ee_radius; /* the model's object half sides and sphere radius, m */
 
   double plan_s;               /* recent plan time, s (moving average) */
   double pre_sp[PLANNER_PRE_MAX][2][4]; /* the prefix's setpoints, one per model step */
@@ -108,5 +114,10 @@ void planner_task_summary(planner_proc *p, const char *how);
 
 /* Plan from the newest inputs and publish PLAN. Return 0, or -1 with a message (LCM). */
 int planner_plan_once(planner_proc *p, double now, char *err, int errlen);
+
+/* Once the task has ended and MOCAP and ROBOT_STATE are fresh: publish the release, a
+ * PLAN of one keypoint at rest clear of the object (iterations 0; nd_release). Return 0,
+ * or -1 with a message (LCM). */
+int planner_release(planner_proc *p, double now, char *err, int errlen);
 
 #endif

@@ -10,7 +10,8 @@
 #    buffers hold the two training pushes and the five held-out evaluation tasks (less any
 #    met where the last push left the object: nothing is pushed, nothing recorded), the
 #    validation loss was scored for each row, every record starts with the object at
-#    rest (a push follows the last without a settled start otherwise), the sliding error
+#    rest and the sphere released clear of it (a push follows the last without a settled
+#    start otherwise), the sliding error
 #    at episode 2 is below half
 #    the starting 50 %, the validation loss fell, and the summary lines, summary.csv and
 #    (with gnuplot) both figures are written.
@@ -73,11 +74,23 @@ met0=$(awk '$1 == "tasks_met_at_start" { print $2 }' "$OUT/run_0/eval_ep0.txt")
 pt_check "val.nrb holds the 5 held-out evaluation tasks but the ${met0:-?} met at the start (got $n_val)" \
   test -n "$met0" -a "$n_val" = $((5 - ${met0:-0}))
 # Each push starts where the one before left the object; its record assumes it at rest.
+# A sphere left pressing on it pushes it on (the controller's integral builds up): each
+# task ends with the planner's release, the sphere 1 cm clear of the object (half of it
+# is asked for here: the object may still slide after the release is planned).
 for b in train val; do
   pt_val v0 buffer "$OUT/run_0/$b.nrb" record_start_speed_max
   pt_check "$b.nrb: every record starts with the object at rest (fastest $v0 m/s)" \
     awk -v v="$v0" 'BEGIN { exit !(v != "" && v < 0.01) }'
+  pt_val g0 buffer "$OUT/run_0/$b.nrb" record_start_gap_min
+  pt_figure "${b}_start_gap_min" "$g0" m
+  pt_check "$b.nrb: every record starts with the sphere clear of the object (closest $g0 m)" \
+    awk -v g="$g0" 'BEGIN { exit !(g != "" && g > 0.005) }'
 done
+PLOG=$OUT/run_0/logs/planner.log
+n_end=$(grep -cE ': task [0-9]+ (succeeded|timed out|ended in a reflex stop) after' "$PLOG")
+n_rel=$(grep -c ': released: ' "$PLOG")
+pt_check "the planner released the sphere after each of the $n_end tasks that ended (got $n_rel)" \
+  test "$n_end" -ge 7 -a "$n_rel" = "$n_end"
 fig() { awk -v n="$1" '$1 == n { print $2 }' "$PT_WORK/study.out"; }
 for f in eval_success_ep0 eval_success_ep2 eval_success_last eval_time_ratio_ep2 \
   eval_time_ratio_last val_loss_ratio_ep2 reflex_stops runs_sliding_within5pct_ep2 \

@@ -22,6 +22,9 @@
 #include "nd_stats.h"
 #include "ndp.h"
 #include "nd_history.h"
+#include "nd_math.h"
+#include "nd_release.h"
+#include "nds_model.h"
 #include "ndp_validate.h"
 
 #define PROG "nudge-logcheck"
@@ -956,7 +959,9 @@ static int cmd_buffer(const lc_opts *o) {
     return 1;
   }
   int64_t undecodable = 0;
-  double start_speed_max = 0.0;
+  double start_speed_max = 0.0, start_gap_min = INFINITY;
+  nds_scene_cfg sc;
+  nds_scene_cfg_default(&sc);
   nd_rfile_tail tail;
   for (;;) {
     nd_rollout r;
@@ -989,6 +994,13 @@ static int cmd_buffer(const lc_opts *o) {
       const double v = hypot(o[0] - r.obj_pos[0], o[1] - r.obj_pos[1]) / (10 * r.dt);
       if (!(v <= start_speed_max)) start_speed_max = v;
     }
+    /* The sphere's gap from the object's sides at the start: released after the last. */
+    const nd_release_box box = {.x = r.obj_pos[0], .y = r.obj_pos[1],
+                                .yaw = nd_quat_yaw(r.obj_quat),
+                                .half = {sc.obj_half[0], sc.obj_half[1]}};
+    double n[2];
+    const double gap = nd_release_gap(&box, sc.ee_radius, r.ee_pos, n);
+    if (!(gap >= start_gap_min)) start_gap_min = gap;
     nd_rollout_free(&r);
   }
   const int corrupt = (int)undecodable + (tail.status == ND_RFILE_CORRUPT);
@@ -1003,6 +1015,7 @@ static int cmd_buffer(const lc_opts *o) {
   for (int i = 1; i < nfound; i++) dup += found[i] == found[i - 1];
   printf("records_duplicate %d count\n", dup);
   printf("record_start_speed_max %.4f m/s\n", start_speed_max);
+  printf("record_start_gap_min %.4f m\n", nfound ? start_gap_min : 0.0);
   if (o->committed) {
     int missing = 0, dup_c = 0, extra = 0;
     for (int i = 0; i < ncommitted; i++) {
