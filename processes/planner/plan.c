@@ -136,7 +136,6 @@ int planner_plan_once(planner_proc *p, double now, char *err, int errlen) {
   return 0;
 }
 
-
 int planner_release(planner_proc *p, double now, char *err, int errlen) {
   const planner_opts *o = p->o;
   if (!ndp_input_fresh(&p->in_mocap, now, o->state_timeout) ||
