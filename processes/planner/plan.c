@@ -10,6 +10,36 @@
 #include "nd_release.h"
 #include "planner.h"
 
+/* The setpoint sp0 the executor starts a plan's first segment from: its newest EE_CMD. No
+ * setpoint yet, or the executor has gone quiet: the robot holds where it is. 1 if from
+ * EE_CMD. */
+static int start_setpoint(const planner_proc *p, double now, double sp0[2][4]) {
+  const int cmd_ok = ndp_input_fresh(&p->in_cmd, now, p->o->state_timeout);
+  for (int k = 0; k < 2; k++) {
+    sp0[k][0] = cmd_ok ? p->cmd.p[k] : p->rs.ee_pos[k];
+    sp0[k][1] = cmd_ok ? p->cmd.v[k] : 0.0;
+    sp0[k][2] = cmd_ok ? p->cmd.a[k] : 0.0;
+    sp0[k][3] = cmd_ok ? p->cmd.j[k] : 0.0;
+  }
+  return cmd_ok;
+}
+
+/* Stamp m with what every PLAN of the task carries (time, id, task, state time, theta) and
+ * publish it. Return 0, or -1 with a message. */
+static int publish(planner_proc *p, nudge_plan_t *m, char *err, int errlen) {
+  m->utime = ndp_utime();
+  m->plan_id = ++p->plan_id;
+  m->task_id = p->task.task_id;
+  m->state_utime = p->mocap.utime;
+  m->theta_version = p->theta_version;
+  if (nudge_plan_t_publish(p->lcm, NDP_CH_PLAN, m) != 0) {
+    snprintf(err, errlen, "publishing on %s failed", NDP_CH_PLAN);
+    return -1;
+  }
+  p->st.published++;
+  return 0;
+}
+
 /* Plan from the newest inputs and publish. Return 0, or -1 with a message (LCM failure). */
 int planner_plan_once(planner_proc *p, double now, char *err, int errlen) {
   const planner_opts *o = p->o;
@@ -23,15 +53,9 @@ int planner_plan_once(planner_proc *p, double now, char *err, int errlen) {
     s.ee_vel[k] = p->rs.ee_vel[k];
   }
   /* The executor starts the plan's first segment from its setpoint, so the rollouts must
-   * too. No setpoint yet, or the executor has gone quiet: the robot holds where it is. */
+   * too. */
   double sp0[2][4];
-  const int cmd_ok = ndp_input_fresh(&p->in_cmd, now, o->state_timeout);
-  for (int k = 0; k < 2; k++) {
-    sp0[k][0] = cmd_ok ? p->cmd.p[k] : p->rs.ee_pos[k];
-    sp0[k][1] = cmd_ok ? p->cmd.v[k] : 0.0;
-    sp0[k][2] = cmd_ok ? p->cmd.a[k] : 0.0;
-    sp0[k][3] = cmd_ok ? p->cmd.j[k] : 0.0;
-  }
+  const int cmd_ok = start_setpoint(p, now, sp0);
   const nd_goal goal = {.x = p->task.goal_x, .y = p->task.goal_y, .yaw = p->task.goal_yaw};
   if (!p->edge_warned) {
     const nds_planner_cfg *pc = nds_planner_config(p->planner);
@@ -102,10 +126,6 @@ int planner_plan_once(planner_proc *p, double now, char *err, int errlen) {
 
   nudge_plan_t m;
   memset(&m, 0, sizeof(m));
-  m.utime = ndp_utime();
-  m.plan_id = ++p->plan_id;
-  m.task_id = p->task.task_id;
-  m.state_utime = p->mocap.utime;
   m.start_utime = start_utime;
   m.start_p[0] = sp0[0][0];
   m.start_p[1] = sp0[1][0];
@@ -119,12 +139,7 @@ int planner_plan_once(planner_proc *p, double now, char *err, int errlen) {
   m.iterations = o->iters;
   m.evals = plan.evals;
   m.plan_ms = ms;
-  m.theta_version = p->theta_version;
-  if (nudge_plan_t_publish(p->lcm, NDP_CH_PLAN, &m) != 0) {
-    snprintf(err, errlen, "publishing on %s failed", NDP_CH_PLAN);
-    return -1;
-  }
-  p->st.published++;
+  if (publish(p, &m, err, errlen)) return -1;
   p->task_plans++;
   p->task_ms_sum += ms;
   p->task_evals += plan.evals;
@@ -149,14 +164,12 @@ int planner_release(planner_proc *p, double now, char *err, int errlen) {
   double key[2];
   const double moved = nd_release_target(&b, p->ee_radius, o->release, p->rs.ee_pos, pc->ws_lo,
                                          pc->ws_hi, key);
-  const int cmd_ok = ndp_input_fresh(&p->in_cmd, now, o->state_timeout);
+  double sp0[2][4];
+  start_setpoint(p, now, sp0);
   nudge_plan_t m;
   memset(&m, 0, sizeof(m));
-  m.utime = ndp_utime();
-  m.plan_id = ++p->plan_id;
-  m.task_id = p->task.task_id;
-  m.state_utime = p->mocap.utime;
-  for (int k = 0; k < 2; k++) m.start_p[k] = cmd_ok ? p->cmd.p[k] : p->rs.ee_pos[k];
+  m.start_p[0] = sp0[0][0];
+  m.start_p[1] = sp0[1][0];
   m.M = 1;
   m.keypoints[0][0] = key[0];
   m.keypoints[0][1] = key[1];
@@ -164,12 +177,7 @@ int planner_release(planner_proc *p, double now, char *err, int errlen) {
   m.predicted[0] = b.x;
   m.predicted[1] = b.y;
   m.predicted[2] = yaw;
-  m.theta_version = p->theta_version;
-  if (nudge_plan_t_publish(p->lcm, NDP_CH_PLAN, &m) != 0) {
-    snprintf(err, errlen, "publishing on %s failed", NDP_CH_PLAN);
-    return -1;
-  }
-  p->st.published++;
+  if (publish(p, &m, err, errlen)) return -1;
   fprintf(stderr, PROG ": task %lld: released: the sphere rests at (%+.3f, %+.3f) m, %.1f mm "
           "out, at least %g m clear of the object\n", (long long)p->task.task_id, key[0], key[1],
           1e3 * moved, o->release);
