@@ -70,6 +70,22 @@ void nd_cem_cfg_default(nd_cem_cfg *cfg, int horizon, int block, int pop, int it
 }
 
 /* Check cfg; 0 or -1 with a message naming the offending field. */
+/* Each bound a number, lower <= upper (NULL: unbounded on that side). */
+static int nd_cem_bounds_check(int dim, const double *lower, const double *upper, char *err,
+                               int errlen) {
+  for (int i = 0; i < dim; i++) {
+    double lo = lower ? lower[i] : -INFINITY;
+    double hi = upper ? upper[i] : INFINITY;
+    if (isnan(lo) || isnan(hi) || !(lo <= hi)) {
+      if (err && errlen > 0)
+        snprintf(err, (size_t)errlen, "nd_cem: bounds of dim %d are invalid (lower %g, upper %g)",
+                 i, lo, hi);
+      return -1;
+    }
+  }
+  return 0;
+}
+
 static int nd_cem_validate(const nd_cem_cfg *cfg, char *err, int errlen) {
   const char *bad = NULL;
   if (cfg->horizon < 1) bad = "horizon must be >= 1";
@@ -91,16 +107,7 @@ static int nd_cem_validate(const nd_cem_cfg *cfg, char *err, int errlen) {
     return -1;
   }
   int dim = cfg->horizon * cfg->block;
-  for (int i = 0; i < dim; i++) {
-    double lo = cfg->lower ? cfg->lower[i] : -INFINITY;
-    double hi = cfg->upper ? cfg->upper[i] : INFINITY;
-    if (isnan(lo) || isnan(hi) || !(lo <= hi)) {
-      if (err && errlen > 0)
-        snprintf(err, (size_t)errlen, "nd_cem: bounds of dim %d are invalid (lower %g, upper %g)",
-                 i, lo, hi);
-      return -1;
-    }
-  }
+  if (nd_cem_bounds_check(dim, cfg->lower, cfg->upper, err, errlen)) return -1;
   if ((size_t)(2 * cfg->pop + 1) * (size_t)dim > ND_CEM_MAX_CELLS) {
     nd_cem_err(err, errlen, "nd_cem: %s", "pop * horizon * block too large");
     return -1;
@@ -239,6 +246,21 @@ void nd_cem_set_dist(nd_cem *cem, const double *mean, const double *std) {
   memcpy(cem->std, std, bytes);
   nd_cem_clip_vec(cem, cem->mean);
   cem->nkept = 0;
+}
+
+int nd_cem_set_bounds(nd_cem *cem, const double *lower, const double *upper, char *err,
+                      int errlen) {
+  if (!cem->lower || !cem->upper) {
+    nd_cem_err(err, errlen, "nd_cem: %s", "bounds can change only on an optimiser created with both");
+    return -1;
+  }
+  if (nd_cem_bounds_check(cem->dim, lower, upper, err, errlen)) return -1;
+  size_t bytes = (size_t)cem->dim * sizeof(double);
+  memcpy(cem->lower, lower, bytes);
+  memcpy(cem->upper, upper, bytes);
+  nd_cem_clip_vec(cem, cem->mean);
+  cem->nkept = 0;
+  return 0;
 }
 
 /* v[t] = v[min(t + steps, H - 1)] per step of `block` values; ascending t only reads

@@ -62,6 +62,11 @@ void nd_cem_free(nd_cem *cem);
 /* Set the sampling distribution (dim values each; mean clipped) and forget kept elites. */
 void nd_cem_set_dist(nd_cem *cem, const double *mean, const double *std);
 
+/* Replace the bounds (dim values each; both were given at creation), clip the mean into
+ * them and forget kept elites. Return 0, or -1 with a message when a bound is invalid. */
+int nd_cem_set_bounds(nd_cem *cem, const double *lower, const double *upper, char *err,
+                      int errlen);
+
 /* Warm start for the next run: shift mean and kept elites `steps` >= 0 steps earlier
  * along the horizon, fill the freed tail with its last step, and reset std to std_init
  * (NULL keeps std). */

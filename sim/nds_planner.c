@@ -10,7 +10,8 @@
 #include "nd_math.h"
 
 struct nds_planner {
-  nds_planner_cfg cfg;
+  nds_planner_cfg cfg;       /* as it runs: v_max and the sampler as nds_planner_set_v_max left */
+  nds_planner_cfg base;      /* as created */
   nds_batch *batch;
   nd_cem *cem;
   nd_rng rng;
@@ -199,6 +200,20 @@ static int plan_cost(void *ctx, const double *x, int n, double *cost) {
   return 0;
 }
 
+/* The sampler's bounds and initial spread from cfg: keypoint positions within the
+ * workspace, velocities within key_v_max. */
+static void sampler_bounds(nds_planner *p) {
+  const nds_planner_cfg *c = &p->cfg;
+  for (int k = 0; k < c->M; k++) {
+    double *lo = p->lower + 4 * k, *hi = p->upper + 4 * k;
+    lo[0] = c->ws_lo[0], hi[0] = c->ws_hi[0];
+    lo[1] = c->ws_lo[1], hi[1] = c->ws_hi[1];
+    lo[2] = lo[3] = -c->key_v_max;
+    hi[2] = hi[3] = c->key_v_max;
+    memcpy(p->std0 + 4 * k, c->std_init, 4 * sizeof(double));
+  }
+}
+
 nds_planner *nds_planner_create(const nds_model *model, const nds_planner_cfg *cfg,
                                 nd_pool *pool, char *err, int errlen) {
   if (cfg->M < 1 || cfg->M > ND_MAX_KEYS || !(cfg->T > 0.0) || cfg->pop < 2 || cfg->iters < 1) {
@@ -216,7 +231,7 @@ nds_planner *nds_planner_create(const nds_model *model, const nds_planner_cfg *c
     snprintf(err, errlen, "planner: out of memory");
     return NULL;
   }
-  p->cfg = *cfg;
+  p->cfg = p->base = *cfg;
   p->dim = cfg->M * 4;
   p->lower = calloc(3 * p->dim, sizeof(double));
   if (!p->lower) {
@@ -226,14 +241,7 @@ nds_planner *nds_planner_create(const nds_model *model, const nds_planner_cfg *c
   }
   p->upper = p->lower + p->dim;
   p->std0 = p->upper + p->dim;
-  for (int k = 0; k < cfg->M; k++) {
-    double *lo = p->lower + 4 * k, *hi = p->upper + 4 * k;
-    lo[0] = cfg->ws_lo[0], hi[0] = cfg->ws_hi[0];
-    lo[1] = cfg->ws_lo[1], hi[1] = cfg->ws_hi[1];
-    lo[2] = lo[3] = -cfg->key_v_max;
-    hi[2] = hi[3] = cfg->key_v_max;
-    memcpy(p->std0 + 4 * k, cfg->std_init, 4 * sizeof(double));
-  }
+  sampler_bounds(p);
   nd_cem_cfg cc;
   nd_cem_cfg_default(&cc, cfg->M, 4, cfg->pop, cfg->iters);
   cc.elite_frac = cfg->elite_frac;
@@ -294,6 +302,25 @@ int nds_planner_set_theta(nds_planner *p, const double theta[ND_NTHETA], char *e
 const nds_planner_cfg *nds_planner_config(const nds_planner *p) { return &p->cfg; }
 
 void nds_planner_reset(nds_planner *p) { p->warm = 0; }
+
+int nds_planner_set_v_max(nds_planner *p, double v_max, char *err, int errlen) {
+  if (!(v_max >= 0.0) || !isfinite(v_max)) {
+    snprintf(err, errlen, "planner: speed limit %g m/s is not a speed (0 for the planner's own)",
+             v_max);
+    return -1;
+  }
+  nds_planner_cfg c = p->base;
+  if (v_max > 0.0 && v_max < c.v_max) {
+    c.v_max = v_max;
+    nds_planner_cfg_fit_limits(&c);
+  }
+  p->cfg.v_max = c.v_max;
+  p->cfg.key_v_max = c.key_v_max;
+  memcpy(p->cfg.std_init, c.std_init, sizeof(c.std_init));
+  sampler_bounds(p);
+  p->warm = 0;
+  return nd_cem_set_bounds(p->cem, p->lower, p->upper, err, errlen);
+}
 
 typedef struct {
   const nds_planner *p;

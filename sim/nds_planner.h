@@ -83,6 +83,11 @@ void nds_planner_retime(nds_planner *p, double dt);
 /* Forget the warm start (call at the start of a task). */
 void nds_planner_reset(nds_planner *p);
 
+/* Plan within end-effector speed v_max (m/s) from now on, the sampler fitted to it as
+ * nds_planner_cfg_fit_limits does; 0, or a limit above the created one, restores the
+ * created limit and sampler. Forgets the warm start. Return 0, or -1 with a message. */
+int nds_planner_set_v_max(nds_planner *p, double v_max, char *err, int errlen);
+
 /* Plan from state s with the executor at setpoint sp0 toward goal. Return 0, or -1 with a
  * message when the input is not finite (out untouched). */
 int nds_planner_plan(nds_planner *p, const nds_state *s, const double sp0[2][4],

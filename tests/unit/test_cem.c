@@ -289,6 +289,59 @@ static void test_samples_within_bounds(void **state) {
   nd_cem_free(cem);
 }
 
+/* New bounds take effect at once: the mean is clipped into them, every later sample keeps
+ * to them, and bounds that cannot hold (lower above upper, NaN) are refused, the old kept. */
+static void test_set_bounds(void **state) {
+  (void)state;
+  double lo[BD], hi[BD], lo2[BD], hi2[BD], m0[BD], s0[BD];
+  for (int i = 0; i < BD; i++) {
+    lo[i] = -4.0, hi[i] = 4.0;
+    lo2[i] = -0.5, hi2[i] = 0.25 + 0.05 * i;
+    m0[i] = 0.0, s0[i] = 2.0;
+  }
+  nd_cem_cfg cfg;
+  icem_cfg(&cfg, BH, BB, 50, 4);
+  cfg.lower = lo;
+  cfg.upper = hi;
+  nd_cem *cem = nd_cem_create(&cfg, NULL, 0);
+  assert_non_null(cem);
+  nd_cem_set_dist(cem, m0, s0);
+  nd_rng r;
+  nd_rng_seed(&r, 9, 0);
+  bounds_ctx wide = {lo, hi, 0, 0, 0};
+  assert_int_equal(nd_cem_run(cem, &r, bounds_cost, &wide), 0);
+  for (int i = 0; i < BD; i++) assert_true(nd_cem_mean(cem)[i] > hi2[i]);  /* pulled toward 3 */
+  char err[160] = "";
+  assert_int_equal(nd_cem_set_bounds(cem, lo2, hi2, err, sizeof(err)), 0);
+  for (int i = 0; i < BD; i++) assert_near(nd_cem_mean(cem)[i], hi2[i], 0.0);
+  bounds_ctx tight = {lo2, hi2, 0, 0, 0};
+  for (int run = 0; run < 3; run++) {
+    nd_cem_shift(cem, 1, s0);
+    assert_int_equal(nd_cem_run(cem, &r, bounds_cost, &tight), 0);
+  }
+  assert_int_equal(tight.outside, 0);
+  assert_true(tight.seen > 0);
+  double bad_lo[BD];
+  memcpy(bad_lo, lo2, sizeof(bad_lo));
+  bad_lo[3] = 1.0;  /* above hi2[3] */
+  assert_int_equal(nd_cem_set_bounds(cem, bad_lo, hi2, err, sizeof(err)), -1);
+  assert_non_null(strstr(err, "dim 3"));
+  bad_lo[3] = NAN;
+  assert_int_equal(nd_cem_set_bounds(cem, bad_lo, hi2, err, sizeof(err)), -1);
+  nd_cem_shift(cem, 1, s0);
+  tight.outside = 0;
+  assert_int_equal(nd_cem_run(cem, &r, bounds_cost, &tight), 0);
+  assert_int_equal(tight.outside, 0);
+  nd_cem_free(cem);
+  /* An optimiser created unbounded has no bounds to replace. */
+  icem_cfg(&cfg, BH, BB, 50, 4);
+  cem = nd_cem_create(&cfg, NULL, 0);
+  assert_non_null(cem);
+  assert_int_equal(nd_cem_set_bounds(cem, lo2, hi2, err, sizeof(err)), -1);
+  assert_non_null(strstr(err, "created with both"));
+  nd_cem_free(cem);
+}
+
 /* ---- colored noise ---- */
 
 #define NH 32
@@ -915,6 +968,7 @@ int main(void) {
       cmocka_unit_test(test_same_seed_bitwise),
       cmocka_unit_test(test_workers_identical),
       cmocka_unit_test(test_samples_within_bounds),
+      cmocka_unit_test(test_set_bounds),
       cmocka_unit_test(test_colored_noise),
       cmocka_unit_test(test_keep_never_worse),
       cmocka_unit_test(test_population_schedule),

@@ -163,12 +163,84 @@ static void test_plan_pool_and_prediction(void **state) {
   }
 }
 
+/* The best plan's peak setpoint speed over its segments from sp0. */
+static double plan_peak_speed(const nds_plan *pl, const double sp0[2][4]) {
+  double s[2][4], sp[2][4], peak = 0.0;
+  memcpy(s, sp0, sizeof(s));
+  nd_snap_seg seg;
+  for (int i = 0; i < pl->M; i++) {
+    nd_snap_seg_make(&seg, (const double(*)[4])s, pl->keys[i], pl->keys[i] + 2, pl->T);
+    for (int j = 0; j <= 200; j++) {
+      nd_snap_seg_eval(&seg, j * pl->T / 200, sp);
+      peak = fmax(peak, hypot(sp[0][ND_V], sp[1][ND_V]));
+    }
+    nd_snap_seg_eval(&seg, pl->T, s);
+  }
+  return peak;
+}
+
+/* A speed limit set on a running planner (a task's own, nudge-tasks --v-max) plans as a
+ * planner created with it: same keypoints from the same seed, within the limit; 0 restores
+ * the created limit and sampler; a limit that is not a speed is refused. */
+static void test_speed_limit(void **state) {
+  fixture *f = *state;
+  const nd_goal g = {.x = 0.10, .y = 0.05, .yaw = 0.3};
+  nds_state s;
+  double sp0[2][4];
+  nds_planner_cfg base, slow;
+  lab_start(f, &s, sp0, &base);
+  base = *nds_planner_config(f->planner);
+  base.pop = 24, base.iters = 2;
+  nds_planner_cfg_fit_limits(&base);
+  slow = base;
+  slow.v_max = 0.2;
+  nds_planner_cfg_fit_limits(&slow);
+  char err[256];
+  nds_planner *a = nds_planner_create(&f->plan, &base, f->pool, err, sizeof(err));
+  nds_planner *b = nds_planner_create(&f->plan, &slow, f->pool, err, sizeof(err));
+  assert_non_null(a);
+  assert_non_null(b);
+  nds_plan pa, pb, fast;
+  assert_int_equal(nds_planner_plan(a, &s, (const double(*)[4])sp0, &g, &fast, err, sizeof(err)), 0);
+  assert_int_equal(nds_planner_set_v_max(a, 0.2, err, sizeof(err)), 0);
+  assert_true(nds_planner_config(a)->v_max == 0.2);
+  assert_true(nds_planner_config(a)->key_v_max == slow.key_v_max);
+  assert_true(nds_planner_config(a)->std_init[2] == slow.std_init[2]);
+  nds_planner_free(a);
+  /* Fresh, so both draw from the same seed: set the limit before the first plan. */
+  a = nds_planner_create(&f->plan, &base, f->pool, err, sizeof(err));
+  assert_non_null(a);
+  assert_int_equal(nds_planner_set_v_max(a, 0.2, err, sizeof(err)), 0);
+  assert_int_equal(nds_planner_plan(a, &s, (const double(*)[4])sp0, &g, &pa, err, sizeof(err)), 0);
+  assert_int_equal(nds_planner_plan(b, &s, (const double(*)[4])sp0, &g, &pb, err, sizeof(err)), 0);
+  assert_memory_equal(pa.keys, pb.keys, sizeof(double) * 4 * base.M);
+  assert_true(pa.cost == pb.cost && pa.cost < base.limit_penalty);
+  const double vf = plan_peak_speed(&fast, (const double(*)[4])sp0),
+               vs = plan_peak_speed(&pa, (const double(*)[4])sp0);
+  printf("peak setpoint speed: %.3f m/s at the created limit %.2f, %.3f m/s at 0.2\n", vf,
+         base.v_max, vs);
+  assert_true(vs <= 0.2 * (1.0 + 1e-9));
+  assert_true(vf > 0.2);  /* the goal asks for more than 0.2 when the planner may */
+  assert_int_equal(nds_planner_set_v_max(a, 0.0, err, sizeof(err)), 0);
+  assert_true(nds_planner_config(a)->v_max == base.v_max);
+  assert_true(nds_planner_config(a)->key_v_max == base.key_v_max);
+  assert_int_equal(nds_planner_set_v_max(a, 5.0 * base.v_max, err, sizeof(err)), 0);
+  assert_true(nds_planner_config(a)->v_max == base.v_max);
+  assert_int_equal(nds_planner_set_v_max(a, -0.1, err, sizeof(err)), -1);
+  assert_non_null(strstr(err, "-0.1"));
+  assert_int_equal(nds_planner_set_v_max(a, NAN, err, sizeof(err)), -1);
+  assert_true(nds_planner_config(a)->v_max == base.v_max);
+  nds_planner_free(a);
+  nds_planner_free(b);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_reaches_goals),
       cmocka_unit_test(test_deterministic),
       cmocka_unit_test(test_redraws),
       cmocka_unit_test(test_plan_pool_and_prediction),
+      cmocka_unit_test(test_speed_limit),
   };
   return cmocka_run_group_tests(tests, setup, teardown);
 }
