@@ -138,6 +138,11 @@ int ndp_check_task(const nudge_task_t *m, char *why, int len) {
     snprintf(why, len, "time_limit = %g is outside (0, 3600] s", m->time_limit);
     return -1;
   }
+  if (!isfinite(m->v_max) || m->v_max < 0.0 || m->v_max > NDP_MAX_VEL) {
+    snprintf(why, len, "v_max = %g is outside [0, %g] m/s (0: the planner's own)", m->v_max,
+             NDP_MAX_VEL);
+    return -1;
+  }
   if (m->task_id < 0) {
     snprintf(why, len, "task_id = %lld is negative", (long long)m->task_id);
     return -1;

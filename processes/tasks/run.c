@@ -101,6 +101,7 @@ int tasks_run(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, const nd_goal *g, in
   t.goal_yaw = g->yaw;
   t.eps = eps;
   t.time_limit = tau;
+  t.v_max = c->v_max;
   /* A goal met where the object lies is reached at once: its record would hold no push,
    * and a refit on it has nothing to learn from but may still move theta. */
   r->met_at_start = nd_task_check(r->task_error, 0.0, eps, tau) == ND_TASK_SUCCESS;

@@ -45,6 +45,7 @@
 /* What the runner was asked to do; constant once parsed. */
 typedef struct {
   double eps, tau;  /* defaults for goals that set none */
+  double v_max;     /* m/s, the end-effector speed limit sent with each task; 0: the planner's */
   double workspace; /* goals need |x|, |y| <= workspace, m */
   double wait;      /* for the first MOCAP frame, s */
   double settle;    /* before each task, at least, s */

@@ -76,7 +76,8 @@ static void fz_valid_task(const nudge_task_t *m) {
   FZ_CHECK(m->utime > 0 && m->task_id >= 0 && fz_bounded(g, 2, NDP_MAX_POS) &&
            fz_bounded(&m->goal_yaw, 1, 100.0) && isfinite(m->eps) && m->eps > 0 &&
            m->eps <= 1.0 && isfinite(m->time_limit) && m->time_limit > 0 &&
-           m->time_limit <= 3600.0,
+           m->time_limit <= 3600.0 && isfinite(m->v_max) && m->v_max >= 0.0 &&
+           m->v_max <= NDP_MAX_VEL,
            "accepted task out of bounds");
 }
 

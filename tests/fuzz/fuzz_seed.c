@@ -170,7 +170,7 @@ static void seed_msgs(void) {
                      .predicted = {0.12, 0.01, 0.05}};
   SEED_MSG(plan_t, pl);
   nudge_task_t tk = {.utime = t, .task_id = 1, .goal_x = 0.1, .goal_y = 0.05,
-                     .goal_yaw = 0.3, .eps = 0.01, .time_limit = 5};
+                     .goal_yaw = 0.3, .eps = 0.01, .time_limit = 5, .v_max = 0.3};
   SEED_MSG(task_t, tk);
   nudge_params_t pa = {.utime = t, .version = 2, .theta_mean = {0.8, 0.004, 1e-4, 0.1},
                        .theta_std = {0.05, 1e-3, 2e-5, 0}, .fit_mask = 7, .loss = 0.01,

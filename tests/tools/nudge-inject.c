@@ -134,7 +134,7 @@ static void send_garbage(inj *j, const unsigned char *tmpl, int tlen) {
   unsigned char w[512];
   int wl;
   if (j->ch != CH_TASK) {
-    nudge_task_t t = {wall_us(), 1, 0.1, 0.0, 0.0, 1e-2, 5.0};
+    nudge_task_t t = {wall_us(), 1, 0.1, 0.0, 0.0, 1e-2, 5.0, 0.0};
     wl = nudge_task_t_encode(w, 0, sizeof w, &t);
   } else {
     nudge_mocap_t m = {wall_us(), 1, {0, 0, 0.05}, {1, 0, 0, 0}, {-0.1, 0, 0.05}};
@@ -317,7 +317,7 @@ static void inject_plan(inj *j) {
 
 static void inject_task(inj *j) {
   /* Template: a reachable goal; only ever sent with one field broken. */
-  const nudge_task_t ok = {wall_us(), 1000000, 0.1, 0.0, 0.0, 1e-2, 5.0};
+  const nudge_task_t ok = {wall_us(), 1000000, 0.1, 0.0, 0.0, 1e-2, 5.0, 0.0};
   nudge_task_t m;
 #define TASK_BAD(stmt)                                                  \
   do {                                                                  \
@@ -334,6 +334,9 @@ static void inject_task(inj *j) {
   TASK_BAD(m.goal_x = NAN);
   TASK_BAD(m.goal_y = 1e6);
   TASK_BAD(m.goal_yaw = INFINITY);
+  TASK_BAD(m.v_max = -0.1);
+  TASK_BAD(m.v_max = NAN);
+  TASK_BAD(m.v_max = 1e3);
   TASK_BAD(m.task_id = -3);
   TASK_BAD(m.utime = 0);
 #undef TASK_BAD

@@ -224,7 +224,7 @@ int main(int argc, char **argv) {
       mocap(&p, v[0], v[1], v[2], v[3], v[4]);
     } else if (!strcmp(w, "task")) {
       if (nums(a, "task", 4, v, &n)) return 2;
-      nudge_task_t m = {p.t, ++p.task_id, v[0], v[1], v[2], v[3], 10.0};
+      nudge_task_t m = {p.t, ++p.task_id, v[0], v[1], v[2], v[3], 10.0, 0.0};
       send(&p, "TASK", nudge_task_t_encode(p.buf, 0, MAX_MSG, &m));
     } else if (!strcmp(w, "plan")) {
       if (nums(a, "plan", -8, v, &n) || (n - 4) % 4 || (n - 4) / 4 > 8) {
