@@ -52,6 +52,10 @@ static void use_robot_state(void *user, const nudge_robot_state_t *m) {
   /* A robot still stopped from the last task resumes when this task's TASK reaches the
    * bridge: only a stop after it has moved again is this task's. */
   if (m->mode != NUDGE_ROBOT_STATE_T_MODE_STOPPED && io->run.id >= 0) io->run.resumed = 1;
+  if (io->run.id >= 0) {
+    const double v = hypot(m->ee_vel[0], m->ee_vel[1]);
+    if (v > io->run.ee_speed_max) io->run.ee_speed_max = v;
+  }
   if (m->mode == NUDGE_ROBOT_STATE_T_MODE_STOPPED && io->run.id >= 0 && io->run.resumed &&
       !io->run.stopped) {
     io->run.stopped = 1;

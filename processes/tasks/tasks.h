@@ -86,6 +86,7 @@ typedef struct {
   int64_t id;         /* the task; -1 between tasks */
   int64_t plans;      /* PLANs for it */
   double obj_path, ee_path;  /* m travelled by object and sphere (MOCAP) */
+  double ee_speed_max;       /* m/s, the sphere's top speed (ROBOT_STATE ee_vel) */
   double last_obj[2], last_ee[2];
   int have_last;
   int resumed;        /* ROBOT_STATE has said the robot is not stopped since the task began */
@@ -118,6 +119,7 @@ typedef struct {
   double yaw_err;    /* rad, modulo the cuboid's half-turn, in [0, pi/2] */
   int64_t plans;     /* PLANs received for the task */
   double obj_path, ee_path;  /* m */
+  double ee_speed_max;       /* m/s */
   int met_at_start;  /* the goal was met before anything moved: nothing recorded */
   char reason[200];
 } tasks_result;

@@ -11,7 +11,8 @@
 #    met where the last push left the object: nothing is pushed, nothing recorded), the
 #    validation loss was scored for each row, every record starts with the object at
 #    rest and the sphere released clear of it (a push follows the last without a settled
-#    start otherwise), the sliding error
+#    start otherwise), the training pushes kept to --train-v-max and the evaluation did
+#    not, the sliding error
 #    at episode 2 is below half
 #    the starting 50 %, the validation loss fell, and the summary lines, summary.csv and
 #    (with gnuplot) both figures are written.
@@ -44,11 +45,13 @@ refused 2 "--episodes" --out "$PT_WORK/x" --episodes 1
 refused 2 "--theta" --out "$PT_WORK/x" --theta 1,2,3
 refused 2 "--replay-mode" --out "$PT_WORK/x" --replay-mode setpoint
 refused 2 "eps" --out "$PT_WORK/x" --eps 7
+refused 2 "--train-v-max" --out "$PT_WORK/x" --train-v-max -1
 pt_check_not "nothing was started or written for refused arguments" test -e "$PT_WORK/x/config.txt"
 
 # --- 2. one run, two episodes ------------------------------------------------------------
 OUT=$PT_WORK/study
-"$STUDY" --out "$OUT" --runs 1 --episodes 2 --theta 0.5,0.0025,0.0001,1 \
+TV=0.2
+"$STUDY" --out "$OUT" --runs 1 --episodes 2 --theta 0.5,0.0025,0.0001,1 --train-v-max $TV \
   --await-fit "$(pt_slow 60)" --tau "$(pt_slow 5)" >"$PT_WORK/study.out" 2>"$PT_WORK/study.err"
 rc=$?
 cat "$PT_WORK/study.out"
@@ -91,6 +94,17 @@ n_end=$(grep -cE ': task [0-9]+ (succeeded|timed out|ended in a reflex stop) aft
 n_rel=$(grep -c ': released: ' "$PLOG")
 pt_check "the planner released the sphere after each of the $n_end tasks that ended (got $n_rel)" \
   test "$n_end" -ge 7 -a "$n_rel" = "$n_end"
+# Training pushes keep to their speed limit (the tracking controller may overshoot a
+# setpoint by a little: 25 % allowed); evaluation runs at the planner's own, faster.
+top() { sed -n 's/.*sphere top speed \([0-9.]*\) m\/s.*/\1/p' "$@" | sort -g | tail -n 1; }
+vt=$(top "$OUT"/run_0/train_ep*.txt) ve=$(top "$OUT"/run_0/eval_ep*.txt)
+pt_figure study_train_top_speed "$vt" m/s
+pt_check "training pushes within --train-v-max $TV (top speed $vt m/s)" \
+  awk -v v="$vt" -v l="$TV" 'BEGIN { exit !(v != "" && v > 0 && v <= 1.25 * l) }'
+pt_check "evaluation pushes faster than training's limit (top speed $ve m/s)" \
+  awk -v v="$ve" -v l="$TV" 'BEGIN { exit !(v != "" && v > 1.25 * l) }'
+pt_check "the planner planned the training tasks at $TV m/s" \
+  test "$(grep -c "started: .*speed limit $TV m/s" "$PLOG")" = 2
 fig() { awk -v n="$1" '$1 == n { print $2 }' "$PT_WORK/study.out"; }
 for f in eval_success_ep0 eval_success_ep2 eval_success_last eval_time_ratio_ep2 \
   eval_time_ratio_last val_loss_ratio_ep2 reflex_stops runs_sliding_within5pct_ep2 \
