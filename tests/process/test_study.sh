@@ -95,14 +95,15 @@ n_rel=$(grep -c ': released: ' "$PLOG")
 pt_check "the planner released the sphere after each of the $n_end tasks that ended (got $n_rel)" \
   test "$n_end" -ge 7 -a "$n_rel" = "$n_end"
 # Training pushes keep to their speed limit (the tracking controller may overshoot a
-# setpoint by a little: 25 % allowed); evaluation runs at the planner's own, faster.
+# setpoint by a little, a stalled machine by more: 50 % allowed); evaluation runs at the
+# planner's own, faster.
 top() { sed -n 's/.*sphere top speed \([0-9.]*\) m\/s.*/\1/p' "$@" | sort -g | tail -n 1; }
 vt=$(top "$OUT"/run_0/train_ep*.txt) ve=$(top "$OUT"/run_0/eval_ep*.txt)
 pt_figure study_train_top_speed "$vt" m/s
 pt_check "training pushes within --train-v-max $TV (top speed $vt m/s)" \
-  awk -v v="$vt" -v l="$TV" 'BEGIN { exit !(v != "" && v > 0 && v <= 1.25 * l) }'
+  awk -v v="$vt" -v l="$TV" 'BEGIN { exit !(v != "" && v > 0 && v <= 1.5 * l) }'
 pt_check "evaluation pushes faster than training's limit (top speed $ve m/s)" \
-  awk -v v="$ve" -v l="$TV" 'BEGIN { exit !(v != "" && v > 1.25 * l) }'
+  awk -v v="$ve" -v l="$TV" 'BEGIN { exit !(v != "" && v > 1.5 * l) }'
 pt_check "the planner planned the training tasks at $TV m/s" \
   test "$(grep -c "started: .*speed limit $TV m/s" "$PLOG")" = 2
 fig() { awk -v n="$1" '$1 == n { print $2 }' "$PT_WORK/study.out"; }
