@@ -188,7 +188,7 @@ static void test_speed_limit(void **state) {
   nds_state s;
   double sp0[2][4];
   nds_planner_cfg base, slow;
-  lab_start(f, &s, sp0, &base);
+  lab_start(f, &s, sp0, &base);           /* its state and setpoint; the ideal's limits: */
   base = *nds_planner_config(f->planner);
   base.pop = 24, base.iters = 2;
   nds_planner_cfg_fit_limits(&base);
