@@ -69,7 +69,6 @@ void nd_cem_cfg_default(nd_cem_cfg *cfg, int horizon, int block, int pop, int it
   cfg->inject_mean = 0;
 }
 
-/* Check cfg; 0 or -1 with a message naming the offending field. */
 /* Each bound a number, lower <= upper (NULL: unbounded on that side). */
 static int nd_cem_bounds_check(int dim, const double *lower, const double *upper, char *err,
                                int errlen) {
@@ -86,6 +85,7 @@ static int nd_cem_bounds_check(int dim, const double *lower, const double *upper
   return 0;
 }
 
+/* Check cfg; 0 or -1 with a message naming the offending field. */
 static int nd_cem_validate(const nd_cem_cfg *cfg, char *err, int errlen) {
   const char *bad = NULL;
   if (cfg->horizon < 1) bad = "horizon must be >= 1";

@@ -82,11 +82,11 @@ static void use_task(void *user, const nudge_task_t *m) {
   p->edge_warned = 0;
   p->task_mocap_lost0 = p->mocap_lost;
   p->task_overflows0 = p->overflows;
-  /* A new task starts cold, within its own speed limit (validated: cannot fail). */
+  /* A new task starts cold (set_v_max forgets the warm start), within its own speed limit
+   * (validated: cannot fail). */
   char err[160];
   if (nds_planner_set_v_max(p->planner, m->v_max, err, sizeof(err)))
     fprintf(stderr, PROG ": task %lld: %s\n", (long long)m->task_id, err);
-  nds_planner_reset(p->planner);
   fprintf(stderr, PROG ": task %lld started: goal (%+.3f, %+.3f) m, yaw %+.1f deg, eps %g, "
           "limit %.1f s, speed limit %g m/s\n", (long long)m->task_id, m->goal_x, m->goal_y,
           m->goal_yaw * 180.0 / ND_PI, m->eps, m->time_limit,

@@ -18,8 +18,6 @@ int main(int argc, char **argv) {
   signal(SIGXFSZ, SIG_IGN);
 
   char err[512];
-  char vbuf[32] = "the planner's";
-  if (cfg.v_max > 0.0) snprintf(vbuf, sizeof(vbuf), "%g m/s", cfg.v_max);
   static tasks_buffer buf;
   static tasks_io io;
   double tau_max = cfg.tau;
@@ -44,6 +42,8 @@ int main(int argc, char **argv) {
   io.st.state = "waiting";
   lcm_t *lcm = ndp_lcm_create(url, err, sizeof(err));
   if (!lcm || tasks_subscribe(&io, lcm, err, sizeof(err))) goto done;
+  char vbuf[32] = "the planner's";
+  if (cfg.v_max > 0.0) snprintf(vbuf, sizeof(vbuf), "%g m/s", cfg.v_max);
   fprintf(stderr, PROG ": %d goal(s), eps %g, tau %g s, speed limit %s, workspace %.2f m, "
           "settle %g s, lcm %s\n", cfg.n, cfg.eps, cfg.tau, vbuf, cfg.workspace, cfg.settle, url);
   const int w = tasks_wait_mocap(lcm, &io, cfg.wait, err, sizeof(err));

@@ -82,7 +82,7 @@ int tasks_options(int argc, char **argv, tasks_cfg *c) {
        .help = "success threshold on L_pos + 0.02 L_rot (per-goal values override)"},
       {"tau", ND_OPT_DOUBLE, &c->tau, 1e-3, ND_GOAL_MAX_TAU, .arg = "S",
        .help = "time limit per task, s (per-goal values override)"},
-      {"v-max", ND_OPT_DOUBLE, &c->v_max, 0.0, 20.0, .arg = "M/S", .def = "0: the planner's",
+      {"v-max", ND_OPT_DOUBLE, &c->v_max, 0.0, NDP_MAX_VEL, .arg = "M/S", .def = "0: the planner's",
        .help = "end-effector speed limit the planner keeps to in these tasks (sent on TASK); a "
                "limit above the planner's own leaves it as it is. nudge-study's training pushes "
                "use it: a slow push shows the friction better"},

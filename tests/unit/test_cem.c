@@ -258,6 +258,17 @@ static int bounds_cost(void *vctx, const double *x, int n, double *cost) {
   return 0;
 }
 
+/* An iCEM optimiser over BH x BB within [lo, hi] (NULL: unbounded). */
+static nd_cem *bounded_cem(const double *lo, const double *hi) {
+  nd_cem_cfg cfg;
+  icem_cfg(&cfg, BH, BB, 50, 4);
+  cfg.lower = lo;
+  cfg.upper = hi;
+  nd_cem *cem = nd_cem_create(&cfg, NULL, 0);
+  assert_non_null(cem);
+  return cem;
+}
+
 static void test_samples_within_bounds(void **state) {
   (void)state;
   double lo[BD], hi[BD], m0[BD], s0[BD];
@@ -267,12 +278,7 @@ static void test_samples_within_bounds(void **state) {
     m0[i] = 5.0;             /* outside: set_dist must clip it */
     s0[i] = 2.0;
   }
-  nd_cem_cfg cfg;
-  icem_cfg(&cfg, BH, BB, 50, 4);
-  cfg.lower = lo;
-  cfg.upper = hi;
-  nd_cem *cem = nd_cem_create(&cfg, NULL, 0);
-  assert_non_null(cem);
+  nd_cem *cem = bounded_cem(lo, hi);
   nd_cem_set_dist(cem, m0, s0);
   for (int i = 0; i < BD; i++) assert_near(nd_cem_mean(cem)[i], hi[i], 0.0);
   bounds_ctx c = {lo, hi, 0, 0, 0};
@@ -299,12 +305,7 @@ static void test_set_bounds(void **state) {
     lo2[i] = -0.5, hi2[i] = 0.25 + 0.05 * i;
     m0[i] = 0.0, s0[i] = 2.0;
   }
-  nd_cem_cfg cfg;
-  icem_cfg(&cfg, BH, BB, 50, 4);
-  cfg.lower = lo;
-  cfg.upper = hi;
-  nd_cem *cem = nd_cem_create(&cfg, NULL, 0);
-  assert_non_null(cem);
+  nd_cem *cem = bounded_cem(lo, hi);
   nd_cem_set_dist(cem, m0, s0);
   nd_rng r;
   nd_rng_seed(&r, 9, 0);
@@ -334,9 +335,7 @@ static void test_set_bounds(void **state) {
   assert_int_equal(tight.outside, 0);
   nd_cem_free(cem);
   /* An optimiser created unbounded has no bounds to replace. */
-  icem_cfg(&cfg, BH, BB, 50, 4);
-  cem = nd_cem_create(&cfg, NULL, 0);
-  assert_non_null(cem);
+  cem = bounded_cem(NULL, NULL);
   assert_int_equal(nd_cem_set_bounds(cem, lo2, hi2, err, sizeof(err)), -1);
   assert_non_null(strstr(err, "created with both"));
   nd_cem_free(cem);
