@@ -25,18 +25,22 @@ static void use_ee_cmd(void *user, const nudge_ee_cmd_t *msg) {
   io->st.received++;
   /* Tracking a command that the executor would never send moves the robot where nothing
    * checked it may go: refused like an invalid one, so the newest valid command goes on
-   * being tracked until it is stale, and then the robot holds. */
-  for (int k = 0; k < 2; k++) {
-    if (msg->p[k] >= io->ws.lo[k] - BRIDGE_WS_MARGIN && msg->p[k] <= io->ws.hi[k] + BRIDGE_WS_MARGIN)
-      continue;
-    char why[256];
-    snprintf(why, sizeof(why), "p (%.3f, %.3f) is outside the workspace x [%.3f, %.3f], "
-             "y [%.3f, %.3f] m plus its %.2f m margin", msg->p[0], msg->p[1], io->ws.lo[0],
-             io->ws.hi[0], io->ws.lo[1], io->ws.hi[1], BRIDGE_WS_MARGIN);
-    io->st.rejected++;
-    ndp_refused(&io->refused_ws, PROG, "EE_CMD", why);
-    return;
-  }
+   * being tracked until it is stale, and then the robot holds. The future's ends are
+   * checked too: the robot follows them while the commander is silent. */
+  const double *at[3] = {msg->p, msg->seg_key, msg->hold};
+  static const char *name[3] = {"p", "seg_key", "hold"};
+  for (int i = 0; i < 3; i++)
+    for (int k = 0; k < 2; k++) {
+      if (at[i][k] >= io->ws.lo[k] - BRIDGE_WS_MARGIN && at[i][k] <= io->ws.hi[k] + BRIDGE_WS_MARGIN)
+        continue;
+      char why[256];
+      snprintf(why, sizeof(why), "%s (%.3f, %.3f) is outside the workspace x [%.3f, %.3f], "
+               "y [%.3f, %.3f] m plus its %.2f m margin", name[i], at[i][0], at[i][1],
+               io->ws.lo[0], io->ws.hi[0], io->ws.lo[1], io->ws.hi[1], BRIDGE_WS_MARGIN);
+      io->st.rejected++;
+      ndp_refused(&io->refused_ws, PROG, "EE_CMD", why);
+      return;
+    }
   bridge_cmd c;
   for (int k = 0; k < 2; k++) {
     c.p[k] = msg->p[k];
@@ -44,6 +48,12 @@ static void use_ee_cmd(void *user, const nudge_ee_cmd_t *msg) {
     c.a[k] = msg->a[k];
     c.j[k] = msg->j[k];
   }
+  /* The future on the command's own clock: 0 is its utime. */
+  c.f.t_seg_end = 1e-6 * (double)(msg->seg_end_utime - msg->utime);
+  c.f.t_brake = 1e-6 * (double)(msg->brake_utime - msg->utime);
+  c.f.t_rest = 1e-6 * (double)(msg->rest_utime - msg->utime);
+  memcpy(c.f.key, msg->seg_key, sizeof(c.f.key));
+  memcpy(c.f.hold, msg->hold, sizeof(c.f.hold));
   c.arrival = ndp_mono();
   c.utime = msg->utime;
   c.seq = msg->seq;
@@ -90,8 +100,9 @@ void bridge_io_report(bridge_io *io, uint64_t *version, const nd_rtloop_stats *l
   if (nd_mailbox_take(&io->b->report, version, r, sizeof(*r)) != (int)sizeof(*r)) return;
   if (r->holding != io->holding) {
     if (r->holding && r->late)
-      fprintf(stderr, PROG ": EE_CMD late by over %g ms: the robot holds its setpoint at "
-              "(%.4f, %.4f)\n", 1e3 * BRIDGE_CMD_HORIZON, r->hold_pos[0], r->hold_pos[1]);
+      fprintf(stderr, PROG ": EE_CMD stamped over %g ms ahead of its arrival (the clocks "
+              "disagree): the robot holds its setpoint at (%.4f, %.4f)\n",
+              1e3 * BRIDGE_CMD_HORIZON, r->hold_pos[0], r->hold_pos[1]);
     else if (r->holding)
       fprintf(stderr, PROG ": %s: the robot holds at (%.4f, %.4f)\n",
               r->have_cmd ? "EE_CMD went stale" : "no EE_CMD yet", r->hold_pos[0],
@@ -107,6 +118,13 @@ void bridge_io_report(bridge_io *io, uint64_t *version, const nd_rtloop_stats *l
             "state (%lld resets)\n", (long long)r->resets);
     io->resets_said = r->resets;
     io->reset_said_at = now;
+  }
+  if (r->silent_events > io->silent_said && now - io->silent_said_at >= 5.0) {
+    fprintf(stderr, PROG ": EE_CMD silent for over %g ms: the robot follows the trajectory the "
+            "last one committed to (%lld times so far)\n", 1e3 * BRIDGE_CMD_HORIZON,
+            (long long)r->silent_events);
+    io->silent_said = r->silent_events;
+    io->silent_said_at = now;
   }
   if (loop->skipped > io->skipped_said && now - io->skip_said_at >= 5.0) {
     fprintf(stderr, PROG ": the world loop stalled: %lld steps dropped so far\n",

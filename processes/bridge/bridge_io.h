@@ -24,8 +24,8 @@ typedef struct {
   bridge_report rep;        /* the newest report */
   int holding;              /* as last said; -1 before */
   int had_cmd;              /* an EE_CMD was tracked before */
-  int64_t resets_said, skipped_said, stops_said;
-  double reset_said_at, skip_said_at;
+  int64_t resets_said, skipped_said, stops_said, silent_said;
+  double reset_said_at, skip_said_at, silent_said_at;
   int64_t task_id;          /* the newest TASK seen; -1 none */
   char state[64];           /* the heartbeat's state word ("stopped: joint 4 velocity") */
 } bridge_io;

@@ -34,19 +34,42 @@ void bridge_loop_report_post(bridge_loop *b) {
   nd_mailbox_post(&b->report, &b->rep, sizeof(b->rep));
 }
 
-/* The setpoint at utime: the newest command while fresh; else hold the last setpoint once
- * the newest command is late (a stalled commander or machine: doc/lab-world.md#commands),
- * or where the sphere is if none came for the timeout. Return 1 if the hold state
- * changed. */
+/* Command c's trajectory h s after its time into sp (bridge_loop.h: Taylor terms near it,
+ * its future beyond; h < 0 only down to -BRIDGE_CMD_HORIZON, by the terms). */
+static void sample(const bridge_cmd *c, double h, double sp[2][4]) {
+  double s[2][4];
+  for (int k = 0; k < 2; k++)
+    s[k][ND_P] = c->p[k], s[k][ND_V] = c->v[k], s[k][ND_A] = c->a[k], s[k][ND_J] = c->j[k];
+  if (h > BRIDGE_CMD_TAYLOR) {
+    nd_exec_future_eval((const double(*)[4])s, 0.0, &c->f, h, sp);
+    return;
+  }
+  h = fmax(h, -BRIDGE_CMD_HORIZON);
+  for (int k = 0; k < 2; k++) {
+    const double p = s[k][ND_P], v = s[k][ND_V], a = s[k][ND_A], j = s[k][ND_J];
+    sp[k][ND_P] = p + h * (v + h * (a / 2 + h * j / 6));
+    sp[k][ND_V] = v + h * (a + h * j / 2);
+    sp[k][ND_A] = a + h * j;
+    sp[k][ND_J] = j;
+  }
+}
+
+/* The setpoint at utime: the newest command's trajectory until it is stale, or the one
+ * before it for a step before its time; hold the last setpoint while the stamps disagree
+ * with the robot's clock, and where the sphere is once the commands are stale or before
+ * the first (doc/lab-world.md#commands). Return 1 if the hold state changed. */
 static int setpoint(bridge_loop *b, double now, int64_t utime, double sp[2][4]) {
   bridge_cmd c;
   if (nd_mailbox_take(&b->cmd, &b->cmd_version, &c, sizeof(c)) == (int)sizeof(c)) {
+    b->prev = b->last;
+    b->have_prev = b->have_cmd;
     b->last = c;
     b->have_cmd = 1;
+    b->silent = 0;
   }
-  const double age = (double)(utime - b->last.utime) * 1e-6;
-  const int timely = b->have_cmd && now - b->last.arrival <= b->cmd_timeout;
-  const int fresh = timely && age <= BRIDGE_CMD_HORIZON;
+  const double h = (double)(utime - b->last.utime) * 1e-6, silence = now - b->last.arrival;
+  const int timely = b->have_cmd && silence <= b->cmd_timeout;
+  const int fresh = timely && h - silence <= BRIDGE_CMD_HORIZON;
   int changed = 0;
   if (fresh && b->holding) {
     b->holding = 0;
@@ -66,15 +89,21 @@ static int setpoint(bridge_loop *b, double now, int64_t utime, double sp[2][4]) 
     b->rep.hold_events++;
     changed = 1;
   }
-  const double h = fmax(age, -BRIDGE_CMD_HORIZON);
-  for (int k = 0; k < 2; k++) {
-    const double p = b->last.p[k], v = b->last.v[k], a = b->last.a[k], j = b->last.j[k];
-    sp[k][ND_P] = b->holding ? b->hold[k] : p + h * (v + h * (a / 2 + h * j / 6));
-    sp[k][ND_V] = b->holding ? 0.0 : v + h * (a + h * j / 2);
-    sp[k][ND_A] = b->holding ? 0.0 : a + h * j;
-    sp[k][ND_J] = b->holding ? 0.0 : j;
-    b->sp_last[k] = sp[k][ND_P];
+  if (fresh && silence > BRIDGE_CMD_HORIZON && !b->silent) {
+    b->silent = 1;
+    b->rep.silent_events++;
   }
+  if (b->holding) {
+    for (int k = 0; k < 2; k++) {
+      sp[k][ND_P] = b->hold[k];
+      sp[k][ND_V] = sp[k][ND_A] = sp[k][ND_J] = 0.0;
+    }
+  } else if (h < 0 && b->have_prev && utime >= b->prev.utime) {
+    sample(&b->prev, (double)(utime - b->prev.utime) * 1e-6, sp);
+  } else {
+    sample(&b->last, h, sp);
+  }
+  for (int k = 0; k < 2; k++) b->sp_last[k] = sp[k][ND_P];
   return changed;
 }
 

@@ -1,7 +1,7 @@
 /* bridge_loop: one step of nudge-bridge's 1 kHz loop, without the clock.
  *
- * Take the newest EE_CMD from its mailbox and track it, sampled at the step's time, while it
- * is fresh; hold the last setpoint once it is late, or where the sphere is if none came;
+ * Take the newest EE_CMD from its mailbox and track the trajectory it commits to, sampled at
+ * the step's time, until it is stale; then hold where the sphere is, as before the first;
  * step the world (sim/nds_world.h);
  * encode ROBOT_STATE and the motion-capture frames the step released into the ring. A step
  * never allocates, locks, prints or waits on I/O (tests/unit/test_rtloop.c counts it);
@@ -14,6 +14,7 @@
 
 #include <stdint.h>
 
+#include "nd_exec.h"
 #include "nd_rtio.h"
 #include "nd_rtloop.h"
 #include "nds_world.h"
@@ -21,31 +22,37 @@
 /* A validated EE_CMD as the loop needs it, stamped with its local arrival. */
 typedef struct {
   double p[2], v[2], a[2], j[2];
+  nd_exec_future f;    /* what the executor committed to after it, times in s after utime */
   int64_t utime;       /* the time the setpoint is for, us */
   double arrival;      /* monotonic s */
   int64_t seq;
 } bridge_cmd;
 
-/* A command is applied at the step's own time: p + v h + a h^2/2 + j h^3/6 for h the
- * step's utime less the command's, as a robot's interface samples a setpoint stream at its
- * own clock (doc/lab-world.md#commands). Taking the newest command as it is would step the
- * setpoint by v times the network's jitter (0.1 mm at 0.5 m/s and 0.2 ms: 100 m/s^2 to the
- * robot's acceleration reflex); without j, an executor late by a few ms leaves j h^3/6 (5
- * um at 500 m/s^3 and 4 ms: 5 m/s^2). A command older than BRIDGE_CMD_HORIZON is not
- * stretched further: the robot holds its last setpoint, as a robot interface does when its
- * commander falls silent, and tracks again when a timely command comes; each change starts
- * a new motion for the reflexes. h is clamped to -BRIDGE_CMD_HORIZON on the other side,
- * so clocks that disagree cannot throw it far. */
+/* A command is applied at the step's own time, as a robot's interface samples a setpoint
+ * stream at its own clock (doc/lab-world.md#commands): for h the step's utime less the
+ * command's, p + v h + a h^2/2 + j h^3/6 up to BRIDGE_CMD_TAYLOR, and beyond it the
+ * trajectory the command's future describes (nd_exec_future_eval), exactly. Taking the
+ * newest command as it is would step the setpoint by v times the network's jitter (0.1 mm
+ * at 0.5 m/s and 0.2 ms: 100 m/s^2 to the robot's acceleration reflex); the Taylor terms
+ * drift from a live segment by snap h^4/24 (0.1 mm after 13 ms), which is why a stalled
+ * commander or machine is bridged by the future, not the terms. A step before the newest
+ * command's time (a catch-up after the bridge stalled) samples the command before it. */
+#define BRIDGE_CMD_TAYLOR 0.002
+
+/* The commands' stamps and the robot's clock may disagree by this much (s): h beyond the
+ * commander's silence plus this is not silence but clocks apart (a wall-clock step), and
+ * the robot holds its last setpoint until they agree again; each hold and resume starts a
+ * new motion for the reflexes. A commander silent this long is reported, and followed. */
 #define BRIDGE_CMD_HORIZON 0.02
 
 /* What the loop reports, every BRIDGE_LOOP_REPORT_STEPS steps and at every hold or stop
  * change. Counters only grow. */
 typedef struct {
-  int64_t steps, resets, hold_events, late_events, stops;
+  int64_t steps, resets, hold_events, late_events, silent_events, stops;
   int64_t robot_states, frames, arm_states;
   double hold_pos[2];  /* the setpoint while holding */
   int32_t holding, have_cmd, stopped;
-  int32_t late;        /* the hold is for a command late by over BRIDGE_CMD_HORIZON */
+  int32_t late;        /* the hold is for stamps apart by over BRIDGE_CMD_HORIZON */
   nds_panda_reflex reflex;  /* the newest stop's */
 } bridge_report;
 
@@ -63,7 +70,9 @@ typedef struct {
   nd_ring out;         /* loop -> I/O: encoded ROBOT_STATE / MOCAP / ARM_STATE */
   atomic_uint_fast64_t resume_req;  /* I/O -> loop: +1 per new task (a stopped arm resumes) */
   /* the loop thread's own */
-  bridge_cmd last;
+  bridge_cmd last, prev; /* the newest command and the one before it */
+  int have_prev;
+  int silent;          /* the newest command's silence is reported */
   uint64_t cmd_version;
   int have_cmd, holding;
   double hold[2];

@@ -11,8 +11,9 @@
  *            lie (negative, zero, beyond the message, no terminating NUL).
  * No message of either kind is valid, so nothing injected can move the robot.
  * A third kind, sent only when asked for (--kind workspace), is valid in every field but
- * lies outside the default workspace box: a PLAN with its keypoints at (0.8, 0) and an
- * EE_CMD at (0.8, 0). The executor and the bridge must refuse these; a stack that did not
+ * lies outside the default workspace box: a PLAN with its keypoints at (0.8, 0), an EE_CMD
+ * at (0.8, 0) and one whose future ends there. The executor and the bridge must refuse
+ * these; a stack that did not
  * would move the robot toward them, which is what the test looks for.
  * A fourth, --plan-to X,Y, is valid and inside any box that holds (X, Y): PLANs that send
  * the robot there and hold, for driving an arm into a limit of its own. */
@@ -253,6 +254,12 @@ static void inject_ee_cmd(inj *j) {
   if (j->o->workspace) {
     m = ok;
     m.p[0] = 0.8;
+    send_ws(j, nudge_ee_cmd_t_encode(j->buf, 0, MAX_MSG, &m));
+    /* A future ending there: a robot follows it while the commander is silent. */
+    m = ok;
+    m.seg_key[0] = m.hold[0] = 0.8;
+    m.seg_end_utime = m.brake_utime = now + 100000;
+    m.rest_utime = now + 200000;
     send_ws(j, nudge_ee_cmd_t_encode(j->buf, 0, MAX_MSG, &m));
   }
   if (j->o->garbage) {

@@ -1,10 +1,12 @@
 /* test_bridge_loop: the bridge's 1 kHz step (processes/bridge/bridge_loop.c), run through
  * nd_rtloop's schedule on synthetic time, allocates nothing and makes no blocking call
  * (counted by rt_count.h's wrappers), and does what the bridge promises: hold until the
- * first command, track fresh commands, hold the last setpoint when they stop, one
- * ROBOT_STATE per step with consecutive seq, MOCAP at 240 Hz stamped with its capture time,
- * and every deadline of a catch-up wake-up stepped; with the lab world's arm, commands
- * that arrive jittered are applied at the step's time and stop no reflex, a jump does. */
+ * first command, track fresh commands, follow the last one when they stop and hold once it
+ * is stale, one ROBOT_STATE per step with consecutive seq, MOCAP at 240 Hz stamped with its
+ * capture time, and every deadline of a catch-up wake-up stepped. With the lab world's arm
+ * and an executor's commands: jittered ones are applied at the step's time and stop no
+ * reflex, a jump does; through a silent commander or a stalled bridge the robot's setpoint
+ * stays on the executor's trajectory and no reflex stops it. */
 #define _GNU_SOURCE
 #include "nd_test.h"
 #include "rt_count.h"
@@ -55,36 +57,70 @@ static void drain(drained *d) {
   }
 }
 
+/* A command to rest at (x, y): its future holds there. */
 static void post_cmd(double now, double x, double y) {
   bridge_cmd c = {.p = {x, y}, .utime = U0 + (int64_t)llround((now - T0) * 1e6), .arrival = now};
+  c.f.key[0] = c.f.hold[0] = x;
+  c.f.key[1] = c.f.hold[1] = y;
   nd_mailbox_post(&g_b.cmd, &c, sizeof c);
 }
 
-/* The lab world's arm fed a smooth path (x moves 10 cm and back in 2 s, at most 0.16 m/s and
- * 0.5 m/s^2) whose commands arrive with a network's jitter: the command for step k comes
- * at step k or k + 1 (seeded), so some steps see two new commands and some none. Applied at
- * the step's time, the setpoint stays smooth: no reflex stops the arm and it tracks. Then one
- * command 0.5 mm off the path (500 m/s^2 in one step): the arm stops on the Cartesian
- * acceleration reflex, ROBOT_STATE says so, and a new task resumes it. */
-static void test_lab_jittered_commands(void **state) {
-  (void)state;
+/* The command an executor ex sends for its setpoint sp at synthetic time t, as
+ * exec_loop.c puts it in an EE_CMD and bridge_io.c takes it (the future on the command's
+ * own clock, microsecond stamps), arriving at t. */
+static bridge_cmd exec_cmd(const nd_exec *ex, const double sp[2][4], double t) {
+  bridge_cmd c = {.utime = U0 + (int64_t)llround(t * 1e6), .arrival = T0 + t};
+  for (int k = 0; k < 2; k++)
+    c.p[k] = sp[k][ND_P], c.v[k] = sp[k][ND_V], c.a[k] = sp[k][ND_A], c.j[k] = sp[k][ND_J];
+  nd_exec_future f;
+  nd_exec_future_get(ex, &f);
+  c.f = f;
+  c.f.t_seg_end = 1e-6 * (double)llround(1e6 * (f.t_seg_end - t));
+  c.f.t_brake = 1e-6 * (double)llround(1e6 * (f.t_brake - t));
+  c.f.t_rest = 1e-6 * (double)llround(1e6 * (f.t_rest - t));
+  return c;
+}
+
+/* The lab world's bridge, fed from a fresh start. */
+static nds_world *lab_bridge(void) {
   char err[256];
   nds_world_cfg wc;
   nds_world_cfg_lab(&wc);
   nds_world *w = nds_world_create(&wc, err, sizeof err);
   if (!w) fail_msg("%s", err);
   bridge_loop_init(&g_b, w, 0.1);
-  enum { STEPS = 3000, JUMP = 2500 };
+  return w;
+}
+
+/* The lab world's arm fed an executor's path (x moves 10 cm and back, two rest-to-rest
+ * segments of 1.4 s, at most 0.16 m/s) whose commands arrive with a network's jitter: the
+ * command for step k comes at step k or k + 1 (seeded), so some steps see two new commands
+ * and some none. Applied at the step's time, the setpoint stays smooth: no reflex stops the
+ * arm and it tracks. Then one command 0.5 mm off the path (500 m/s^2 in one step): the arm
+ * stops on the Cartesian acceleration reflex, ROBOT_STATE says so, and a new task resumes
+ * it. */
+static void test_lab_jittered_commands(void **state) {
+  (void)state;
+  char err[256];
+  nds_world *w = lab_bridge();
+  const nd_exec_cfg cfg = nd_exec_cfg_default();
+  nd_exec ex;
+  nd_exec_init(&ex, (const double[2]){-0.10, 0.0}, 0.0);
+  enum { STEPS = 3000, BACK = 1400, JUMP = 2500 };
   uint64_t rng = 12345;
   bridge_cmd late = {0};
   int have_late = 0;
   double err_max = 0;
   drained d = {0};
   for (int k = 0; k < STEPS; k++) {
-    const double t = 1e-3 * k, now = T0 + t, om = M_PI;
-    bridge_cmd c = {.utime = U0 + (int64_t)k * 1000, .arrival = now};
-    c.p[0] = -0.10 + 0.05 * (1 - cos(om * t)), c.v[0] = 0.05 * om * sin(om * t);
-    c.a[0] = 0.05 * om * om * cos(om * t), c.j[0] = -0.05 * om * om * om * sin(om * t);
+    const double t = 1e-3 * k, now = T0 + t;
+    if (k == 0 || k == BACK) {
+      const double key[4] = {k ? -0.10 : 0.0, 0.0, 0.0, 0.0};
+      if (nd_exec_plan(&ex, &cfg, t, key, 1.4, err, sizeof err)) fail_msg("%s", err);
+    }
+    double sp[2][4];
+    nd_exec_step(&ex, &cfg, t, 0, sp);
+    bridge_cmd c = exec_cmd(&ex, (const double(*)[4])sp, t);
     if (k == JUMP) c.p[0] += 5e-4;
     if (have_late) nd_mailbox_post(&g_b.cmd, &late, sizeof late), have_late = 0;
     rng = rng * 6364136223846793005ULL + 1442695040888963407ULL;
@@ -92,7 +128,7 @@ static void test_lab_jittered_commands(void **state) {
     else late = c, have_late = 1;
     bridge_loop_step(&g_b, now, c.utime);
     drain(&d);
-    if (k > 200 && k < JUMP) err_max = fmax(err_max, fabs(d.ee[0] - c.p[0]));
+    if (k > 200 && k < JUMP) err_max = fmax(err_max, fabs(d.ee[0] - sp[0][ND_P]));
     if (k == JUMP - 1) {
       printf("lab_jitter_stops %lld count\nlab_jitter_track_err_max %.4f m\n",
              (long long)g_b.rep.stops, err_max);
@@ -109,6 +145,125 @@ static void test_lab_jittered_commands(void **state) {
   bridge_loop_step(&g_b, T0 + 1e-3 * STEPS, U0 + (int64_t)STEPS * 1000);
   drain(&d);
   assert_int_not_equal(d.mode, NUDGE_ROBOT_STATE_T_MODE_STOPPED);
+  nds_world_free(w);
+}
+
+/* A live-like executor: every 30 ms a new plan toward where a target speeding up to 0.2 m/s
+ * along x and swaying 6 cm in y will be in 0.15 s, each a fresh 0.15 s segment (the high
+ * snap of a live segment's start; up to 1.9 m/s^2, within the arm's 2). The target's state
+ * at t into key. */
+static void target_key(double t, double key[4]) {
+  const double w = 2 * M_PI / 1.2;
+  key[0] = -0.10 + 0.2 * t * t / (t + 0.3);
+  key[1] = 0.03 * (1 - cos(w * t));
+  key[2] = 0.2 * t * (t + 0.6) / ((t + 0.3) * (t + 0.3));
+  key[3] = 0.03 * w * sin(w * t);
+}
+
+/* The commander falls silent, as the executor does when the machine stalls: for 13 ms and
+ * for 45 ms of a live-like path, no command, no plan, and the executor's clock jumps on
+ * (nd_rtloop's skip) when it resumes. The robot's setpoint follows the trajectory the last
+ * command committed to, so it stays on the executor's own trajectory to 1 um throughout
+ * (the Taylor terms alone drift by snap h^4/24 off it, 0.1 mm after 13 ms), the executor's
+ * next command continues it, and no reflex stops the arm. The 45 ms silence is reported;
+ * the robot never holds. */
+static void test_lab_commander_silent(void **state) {
+  (void)state;
+  char err[256];
+  nds_world *w = lab_bridge();
+  const nd_exec_cfg cfg = nd_exec_cfg_default();
+  nd_exec ex;
+  nd_exec_init(&ex, (const double[2]){-0.10, 0.0}, 0.0);
+  enum { STEPS = 1200 };
+  double off_max = 0, off_silent = 0, off_taylor = 0, err_max = 0;
+  bridge_cmd c = {0};
+  drained d = {0};
+  for (int k = 0; k < STEPS; k++) {
+    const double t = 1e-3 * k;
+    const int silent = (k >= 300 && k < 313) || (k >= 600 && k < 645);
+    if (!silent) {
+      if (k % 30 == 0) {
+        double key[4];
+        target_key(t + 0.15, key);
+        if (nd_exec_plan(&ex, &cfg, t, key, 0.15, err, sizeof err)) fail_msg("%s", err);
+      }
+      double sp[2][4];
+      nd_exec_step(&ex, &cfg, t, 0, sp);
+      c = exec_cmd(&ex, (const double(*)[4])sp, t);
+      nd_mailbox_post(&g_b.cmd, &c, sizeof c);
+    }
+    bridge_loop_step(&g_b, T0 + t, U0 + (int64_t)k * 1000);
+    drain(&d);
+    double want[2][4];
+    nd_exec_eval(&ex, t, want);
+    const double off = hypot(g_b.sp_last[0] - want[0][ND_P], g_b.sp_last[1] - want[1][ND_P]);
+    off_max = fmax(off_max, off);
+    if (silent) {
+      off_silent = fmax(off_silent, off);
+      /* What the last command's Taylor terms alone would have commanded. */
+      const double h = t - 1e-6 * (double)(c.utime - U0);
+      double tay[2];
+      for (int i = 0; i < 2; i++)
+        tay[i] = c.p[i] + h * (c.v[i] + h * (c.a[i] / 2 + h * c.j[i] / 6)) - want[i][ND_P];
+      off_taylor = fmax(off_taylor, hypot(tay[0], tay[1]));
+    }
+    if (k > 100) err_max = fmax(err_max, hypot(d.ee[0] - want[0][ND_P], d.ee[1] - want[1][ND_P]));
+  }
+  printf("silent_setpoint_off_max %.2e m (silences %.2e m, Taylor terms alone %.2e m)\n"
+         "silent_stops %lld count\nsilent_track_err_max %.4f m\n", off_max, off_silent,
+         off_taylor, (long long)g_b.rep.stops, err_max);
+  assert_true(off_silent > 0);  /* the silences were bridged, not skipped */
+  assert_true(off_taylor > 1e-5);  /* and the path is one the Taylor terms cannot bridge */
+  assert_true(off_max < 1e-6);
+  assert_int_equal(g_b.rep.stops, 0);
+  assert_int_equal(g_b.rep.silent_events, 1);
+  assert_int_equal(g_b.rep.late_events + g_b.rep.hold_events, 0);
+  assert_int_equal(d.mode, NUDGE_ROBOT_STATE_T_MODE_TRACKING);
+  assert_true(err_max < 5e-3);
+  nds_world_free(w);
+}
+
+/* The bridge stalls while the commander goes on (the bridge's loop catches up afterwards, a
+ * step per missed deadline, with only the newest command in its mailbox): steps before that
+ * command's time sample the command before it, so the catch-up keeps to the executor's
+ * trajectory to 1 um and no reflex stops the arm. */
+static void test_lab_bridge_stall(void **state) {
+  (void)state;
+  char err[256];
+  nds_world *w = lab_bridge();
+  const nd_exec_cfg cfg = nd_exec_cfg_default();
+  nd_exec ex;
+  nd_exec_init(&ex, (const double[2]){-0.10, 0.0}, 0.0);
+  enum { STEPS = 1000, STALL = 400, STALL_END = 415 };
+  static double traj[STEPS][2];  /* the executor's setpoint position per step */
+  double off_max = 0;
+  drained d = {0};
+  for (int k = 0; k < STEPS; k++) {
+    const double t = 1e-3 * k;
+    if (k % 30 == 0) {
+      double key[4];
+      target_key(t + 0.15, key);
+      if (nd_exec_plan(&ex, &cfg, t, key, 0.15, err, sizeof err)) fail_msg("%s", err);
+    }
+    double sp[2][4];
+    nd_exec_step(&ex, &cfg, t, 0, sp);
+    traj[k][0] = sp[0][ND_P], traj[k][1] = sp[1][ND_P];
+    bridge_cmd c = exec_cmd(&ex, (const double(*)[4])sp, t);
+    nd_mailbox_post(&g_b.cmd, &c, sizeof c);
+    if (k >= STALL && k < STALL_END) continue;
+    /* At STALL_END the missed deadlines too, each at its own time. */
+    for (int i = k == STALL_END ? STALL : k; i <= k; i++) {
+      bridge_loop_step(&g_b, T0 + 1e-3 * i, U0 + (int64_t)i * 1000);
+      drain(&d);
+      off_max = fmax(off_max, hypot(g_b.sp_last[0] - traj[i][0], g_b.sp_last[1] - traj[i][1]));
+    }
+  }
+  printf("stall_setpoint_off_max %.2e m\nstall_stops %lld count\n", off_max,
+         (long long)g_b.rep.stops);
+  assert_int_equal(g_b.rep.steps, STEPS);
+  assert_true(off_max < 1e-6);
+  assert_int_equal(g_b.rep.stops, 0);
+  assert_int_equal(g_b.rep.late_events + g_b.rep.hold_events, 0);
   nds_world_free(w);
 }
 
@@ -176,11 +331,13 @@ static void test_step_allocates_nothing(void **state) {
   /* MOCAP at 240 Hz of the 1 kHz steps, each stamped with its step's time. */
   assert_near((double)g_b.mc_seq / (double)g_b.rep.steps, 0.24, 1e-3);
   assert_int_equal(d.late_frames, 0);
-  /* Tracking while fresh, holding when stale, tracking again. */
+  /* Tracking while fresh, following the last command once they stop, holding where the
+   * sphere is when it went stale, tracking again. */
   assert_true(tracked > (STALE - TRACK - 500) * 0.95);
   assert_true(held_still > (BACK - STALE - 1200) * 0.95);
-  assert_int_equal(g_b.rep.late_events, 1);  /* 20 ms after the commands stopped */
-  assert_int_equal(g_b.rep.hold_events, 1);  /* and again when they went stale */
+  assert_int_equal(g_b.rep.silent_events, 1);  /* 20 ms after the commands stopped */
+  assert_int_equal(g_b.rep.hold_events, 1);    /* and the hold when they went stale */
+  assert_int_equal(g_b.rep.late_events, 0);
   assert_int_equal(g_b.holding, 0);
   nds_world_free(w);
 }
@@ -189,6 +346,8 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_step_allocates_nothing),
       cmocka_unit_test(test_lab_jittered_commands),
+      cmocka_unit_test(test_lab_commander_silent),
+      cmocka_unit_test(test_lab_bridge_stall),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
