@@ -190,6 +190,10 @@ void bridge_loop_step(bridge_loop *b, double now, int64_t utime) {
   if (post || b->rep.steps % BRIDGE_LOOP_REPORT_STEPS == 0) bridge_loop_report_post(b);
 }
 
+int bridge_loop_catch_up_max(double rate) {
+  return (int)ceil(BRIDGE_CATCH_UP_S * rate);
+}
+
 void bridge_loop_tick(void *ctx, const nd_rtloop_tick *t) {
   bridge_loop_step(ctx, t->deadline, t->utime);
 }

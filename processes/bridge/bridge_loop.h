@@ -94,6 +94,17 @@ void bridge_loop_step(bridge_loop *b, double now, int64_t utime);
  * deadline's time, so world time keeps up with real time. */
 void bridge_loop_tick(void *ctx, const nd_rtloop_tick *t);
 
+/* How long a stall of the machine the loop replays whole (s), beyond the default command
+ * timeout. Every deadline the commands are stamped for gets its world step, so the robot
+ * lives through the stall as the commands did; a deadline skipped would move the sampled
+ * setpoint by the skipped time in one step (3 mm at 0.3 m/s and 10 ms, 3 m/s to the
+ * velocity reflex). Longer stalls leave the commands stale anyway. At 1 kHz a whole
+ * replay's messages (150 states, 36 frames, 8 arm states) fit the out ring unread. */
+#define BRIDGE_CATCH_UP_S 0.15
+
+/* nd_rtloop_cfg.catch_up_max for a loop at rate Hz: BRIDGE_CATCH_UP_S of deadlines. */
+int bridge_loop_catch_up_max(double rate);
+
 /* Post the report now. */
 void bridge_loop_report_post(bridge_loop *b);
 

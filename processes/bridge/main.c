@@ -34,6 +34,7 @@ int main(int argc, char **argv) {
     return nd_opt_fail(&spec, "--model %s: timestep %g s is outside [0.1, 50] ms for a real-time "
                        "world; give --rate", wc.model_path, 1.0 / rc.rate);
   }
+  rc.catch_up_max = bridge_loop_catch_up_max(rc.rate);
   bridge_loop *b = calloc(1, sizeof(*b));  /* the ring is 256 KB: not on the stack */
   static bridge_io io;
   static nd_rtloop loop;
