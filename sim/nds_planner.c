@@ -73,11 +73,38 @@ void nds_planner_cfg_default(nds_planner_cfg *cfg) {
   cfg->seed = 1;
 }
 
+/* What a candidate asks of the robot (setpoint_peaks). */
+typedef struct {
+  double v, a;     /* peak speed (m/s) and acceleration (m/s^2) */
+  double load;     /* the arm's peak load (nds_reach_load); 0 without an arm */
+  double outside;  /* m beyond the workspace plus what the executor allows (<= 0: inside) */
+} nds_peaks;
+
+/* The executor refuses a segment, or the brake after it, that leaves its box plus
+ * ND_EXEC_WS_MARGIN (nd_exec.h). The planner keeps this much further inside: its samples
+ * are a rollout step apart (the position between them moves by up to h^2 a / 8). */
+#define NDS_PLANNER_WS_SLACK 0.002
+
+/* How far (m) position pos, and a brake from it at velocity vel, get beyond the box plus
+ * the executor's margin less the slack; a brake travels at most 15/16 v^2 / a_max
+ * along each axis (nd_exec.c), here with the planner's a_max, below the executor's. */
+static double ws_outside(const nds_planner_cfg *c, const double pos[2], const double vel[2]) {
+  const double m = ND_EXEC_WS_MARGIN - NDS_PLANNER_WS_SLACK;
+  double worst = -INFINITY;
+  for (int ax = 0; ax < 2; ax++) {
+    const double brake = vel ? 15.0 / 16.0 * vel[ax] * fabs(vel[ax]) / c->a_max : 0.0;
+    const double lo = fmin(pos[ax], pos[ax] + brake), hi = fmax(pos[ax], pos[ax] + brake);
+    worst = fmax(worst, fmax((c->ws_lo[ax] - m) - lo, hi - (c->ws_hi[ax] + m)));
+  }
+  return worst;
+}
+
 /* Peaks over the setpoints of keys from sp0, sampled at the rollouts' step: speed,
- * acceleration and, with an arm, its load (nds_reach_load). The setpoints alone decide
- * them: no physics needed. With early set it stops at the first sample beyond a limit,
- * its peaks then only a lower bound. */
-static void setpoint_peaks(const nds_planner *p, const double *keys, int early, double peak[3]) {
+ * acceleration, with an arm its load (nds_reach_load), and how far the segments, or the
+ * executor's brake after the first, leave the workspace. The setpoints alone decide them:
+ * no physics needed. With early set it stops at the first sample beyond a limit, its
+ * peaks then only a lower bound. */
+static void setpoint_peaks(const nds_planner *p, const double *keys, int early, nds_peaks *pk) {
   const nds_planner_cfg *c = &p->cfg;
   nd_snap_seg seg;
   double s[2][4], sp[2][4];
@@ -85,6 +112,7 @@ static void setpoint_peaks(const nds_planner *p, const double *keys, int early, 
   const int n = (int)ceil(c->T / nds_batch_model(p->batch, 0)->m->opt.timestep - 1e-9);
   const double v2_max = c->v_max * c->v_max, a2_max = c->a_max * c->a_max;
   double v2 = 0.0, a2 = 0.0, load = 0.0;
+  double out = ws_outside(c, keys, keys + 2);
   for (int i = 0; i < c->M; i++) {
     const double *k = keys + 4 * i;
     nd_snap_seg_make(&seg, (const double(*)[4])s, k, k + 2, c->T);
@@ -92,22 +120,26 @@ static void setpoint_peaks(const nds_planner *p, const double *keys, int early, 
       nd_snap_seg_eval(&seg, j * c->T / n, sp);
       const double sv = sp[0][ND_V] * sp[0][ND_V] + sp[1][ND_V] * sp[1][ND_V];
       const double sa = sp[0][ND_A] * sp[0][ND_A] + sp[1][ND_A] * sp[1][ND_A];
+      const double pos[2] = {sp[0][ND_P], sp[1][ND_P]};
       if (!(sv <= v2)) v2 = sv;
       if (!(sa <= a2)) a2 = sa;
+      const double o = ws_outside(c, pos, NULL);
+      if (!(o <= out)) out = o;
       if (c->reach) {
-        const double pos[2] = {sp[0][ND_P], sp[1][ND_P]}, vel[2] = {sp[0][ND_V], sp[1][ND_V]},
-                     acc[2] = {sp[0][ND_A], sp[1][ND_A]};
+        const double vel[2] = {sp[0][ND_V], sp[1][ND_V]}, acc[2] = {sp[0][ND_A], sp[1][ND_A]};
         const double l = nds_reach_load(c->reach, pos, vel, acc);
         if (!(l <= load)) load = l;
       }
-      if (early && !(v2 <= v2_max && a2 <= a2_max && load <= c->reach_max)) goto out;
+      if (early && !(v2 <= v2_max && a2 <= a2_max && load <= c->reach_max && out <= 0.0))
+        goto done;
     }
     nd_snap_seg_eval(&seg, c->T, s);
   }
-out:
-  peak[0] = sqrt(v2);
-  peak[1] = sqrt(a2);
-  peak[2] = load;
+done:
+  pk->v = sqrt(v2);
+  pk->a = sqrt(a2);
+  pk->load = load;
+  pk->outside = out;
 }
 
 /* A candidate beyond the limits costs a step penalty plus its relative excess, which ranks
@@ -125,14 +157,15 @@ void nds_planner_cfg_fit_limits(nds_planner_cfg *cfg) {
 static double limit_excess(const nds_planner *p, const double *keys, int early, int *cart,
                            int *arm) {
   const nds_planner_cfg *c = &p->cfg;
-  double pk[3];
-  setpoint_peaks(p, keys, early, pk);
-  double ex = fmax(0.0, pk[0] / c->v_max - 1.0) + fmax(0.0, pk[1] / c->a_max - 1.0);
+  nds_peaks pk;
+  setpoint_peaks(p, keys, early, &pk);
+  double ex = fmax(0.0, pk.v / c->v_max - 1.0) + fmax(0.0, pk.a / c->a_max - 1.0) +
+              fmax(0.0, pk.outside / ND_EXEC_WS_MARGIN);
   *cart = ex > 0.0;
   *arm = 0;
   if (c->reach) {
     /* The arm's joints count as its Cartesian limits; no IK counts as twice the limit. */
-    const double ea = fmin(2.0, fmax(0.0, pk[2] / c->reach_max - 1.0));
+    const double ea = fmin(2.0, fmax(0.0, pk.load / c->reach_max - 1.0));
     *arm = ea > 0.0;
     ex += ea;
   }

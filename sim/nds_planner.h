@@ -1,8 +1,10 @@
 /* nds_planner: one MPC planning step. (state, setpoint, goal, theta, previous plan) ->
  * best keypoint sequence, by iCEM over M keypoints (x, y, vx, vy) with MuJoCo rollouts
  * on the pool. Candidates whose segments exceed the end-effector speed or acceleration
- * limits (or, with an arm's reach map, its joints') are penalised and not simulated, so what
- * is planned is what the robot can execute and no time goes to what it cannot. */
+ * limits (or, with an arm's reach map, its joints'), or that the executor would refuse for
+ * leaving its workspace box plus margin (a segment's overshoot, the brake after the first),
+ * are penalised and not simulated, so what is planned is what the robot can execute and no
+ * time goes to what it cannot. */
 #ifndef NDS_PLANNER_H
 #define NDS_PLANNER_H
 

@@ -5,6 +5,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "nd_exec.h"
 #include "nds_episode.h"
 #include "nds_tfx.h"
 
@@ -234,6 +235,63 @@ static void test_speed_limit(void **state) {
   nds_planner_free(b);
 }
 
+/* The planner keeps to what the executor accepts. Near the lab box's x edge a keypoint
+ * whose velocity points inward needs a segment that overshoots the box, and one moving
+ * outward a brake that does: the executor refuses either beyond its margin
+ * (ND_EXEC_EBOX). With the sphere 2 cm from the edge running toward it at 0.3 m/s, every
+ * plan's first keypoint is one the lab's executor, on that same trajectory, accepts
+ * (nd_exec_plan); a planner blind to the box had 7 of these 18 refused. */
+static void test_workspace_edge(void **state) {
+  fixture *f = *state;
+  nd_exec_cfg ec = nd_exec_cfg_default();
+  ec.v_max = 0.5, ec.a_max = 2.0;  /* nudge-up's lab executor */
+  ec.ws_lo[0] = -0.15, ec.ws_lo[1] = -0.30, ec.ws_hi[0] = 0.15, ec.ws_hi[1] = 0.40;
+  char err[256];
+  int plans = 0, refused = 0, over = 0, evals = 0;
+  uint64_t rng = 99;
+  for (int start = 0; start < 6; start++) {
+    nds_state s;
+    double sp0[2][4];
+    nds_planner_cfg cfg;
+    lab_start(f, &s, sp0, &cfg);
+    for (int k = 0; k < 2; k++) cfg.ws_lo[k] = ec.ws_lo[k], cfg.ws_hi[k] = ec.ws_hi[k];
+    cfg.redraws = 8;
+    nds_planner_cfg_fit_limits(&cfg);
+    /* The object 4-7 cm inside the x edge, the sphere beyond it heading for the edge. */
+    rng = rng * 6364136223846793005ULL + 1442695040888963407ULL;
+    const double side = (rng >> 40) & 1 ? 1.0 : -1.0, u = (double)(rng >> 11) * 0x1p-53;
+    const double ox = side * (0.08 + 0.03 * u);
+    const double key[4] = {side * 0.13, -0.06 + 0.12 * u, side * 0.3, 0.1 - 0.2 * u};
+    /* The executor's trajectory there: from rest 9 cm inward, arriving at key. */
+    nd_exec ex;
+    nd_exec_init(&ex, (const double[2]){key[0] - side * 0.09, key[1]}, 0.0);
+    assert_int_equal(nd_exec_plan(&ex, &ec, 0.0, key, 0.5, err, sizeof(err)), ND_EXEC_OK);
+    const double t0 = ex.seg.T;
+    nd_exec_step(&ex, &ec, t0, 0, sp0);
+    const double ee[2] = {sp0[0][ND_P], sp0[1][ND_P]};
+    nds_state_rest(&f->world, ox, 0.0, 0.0, ee, &s);
+    const nd_goal g = {.x = side * 0.12, .y = 0.12, .yaw = 0.4};
+    nds_planner *p = nds_planner_create(&f->plan, &cfg, f->pool, err, sizeof(err));
+    assert_non_null(p);
+    for (int k = 0; k < 3; k++) {  /* cold, then warm-started */
+      nds_plan pl;
+      assert_int_equal(nds_planner_plan(p, &s, (const double(*)[4])sp0, &g, &pl, err, sizeof(err)), 0);
+      assert_true(pl.cost < cfg.limit_penalty);
+      nd_exec e = ex;
+      const int rc = nd_exec_plan(&e, &ec, t0, pl.keys[0], pl.T, err, sizeof(err));
+      if (rc) printf("refused: %s\n", err);
+      refused += rc != ND_EXEC_OK;
+      plans++;
+      over += pl.over_limits;
+      evals += pl.evals;
+    }
+    nds_planner_free(p);
+  }
+  printf("edge_plans %d count\nedge_plans_refused %d count\nedge_candidates_beyond %.1f %%\n",
+         plans, refused, 100.0 * over / evals);
+  assert_int_equal(refused, 0);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_reaches_goals),
@@ -241,6 +299,7 @@ int main(void) {
       cmocka_unit_test(test_redraws),
       cmocka_unit_test(test_plan_pool_and_prediction),
       cmocka_unit_test(test_speed_limit),
+      cmocka_unit_test(test_workspace_edge),
   };
   return cmocka_run_group_tests(tests, setup, teardown);
 }
