@@ -93,14 +93,22 @@ static int setpoint(bridge_loop *b, double now, int64_t utime, double sp[2][4]) 
     b->silent = 1;
     b->rep.silent_events++;
   }
+  b->sample[1] = b->sample[0];
+  bridge_sample *sa = &b->sample[0];
+  sa->silence = silence;
   if (b->holding) {
     for (int k = 0; k < 2; k++) {
       sp[k][ND_P] = b->hold[k];
       sp[k][ND_V] = sp[k][ND_A] = sp[k][ND_J] = 0.0;
     }
+    sa->how = BRIDGE_SAMPLE_HOLD, sa->h = h, sa->cmd_seq = b->last.seq;
   } else if (h < 0 && b->have_prev && utime >= b->prev.utime) {
-    sample(&b->prev, (double)(utime - b->prev.utime) * 1e-6, sp);
+    sa->h = (double)(utime - b->prev.utime) * 1e-6;
+    sa->how = BRIDGE_SAMPLE_PREV, sa->cmd_seq = b->prev.seq;
+    sample(&b->prev, sa->h, sp);
   } else {
+    sa->how = h > BRIDGE_CMD_TAYLOR ? BRIDGE_SAMPLE_FUTURE : BRIDGE_SAMPLE_TAYLOR;
+    sa->h = h, sa->cmd_seq = b->last.seq;
     sample(&b->last, h, sp);
   }
   for (int k = 0; k < 2; k++) b->sp_last[k] = sp[k][ND_P];
@@ -141,7 +149,7 @@ void bridge_loop_step(bridge_loop *b, double now, int64_t utime) {
   if (out.robot.stopped != b->rep.stopped) {
     b->rep.stopped = out.robot.stopped;
     b->rep.stops += out.stopped_now;
-    if (out.stopped_now) b->rep.reflex = out.robot.reflex;
+    if (out.stopped_now) b->rep.reflex = out.robot.reflex, memcpy(b->rep.stop_sample, b->sample, sizeof(b->sample));
     post = 1;
   }
 

@@ -45,6 +45,21 @@ typedef struct {
  * new motion for the reflexes. A commander silent this long is reported, and followed. */
 #define BRIDGE_CMD_HORIZON 0.02
 
+/* How a step's setpoint was sampled, for telling what a reflex stop followed. */
+typedef enum {
+  BRIDGE_SAMPLE_HOLD = 0,    /* holding */
+  BRIDGE_SAMPLE_TAYLOR = 1,  /* the newest command's Taylor terms */
+  BRIDGE_SAMPLE_FUTURE = 2,  /* the newest command's future */
+  BRIDGE_SAMPLE_PREV = 3     /* the command before it (a step before its time) */
+} bridge_sample_how;
+
+typedef struct {
+  int32_t how;          /* bridge_sample_how */
+  double h;             /* s after the sampled command's time */
+  double silence;       /* s since the newest command arrived */
+  int64_t cmd_seq;      /* the sampled command's seq */
+} bridge_sample;
+
 /* What the loop reports, every BRIDGE_LOOP_REPORT_STEPS steps and at every hold or stop
  * change. Counters only grow. */
 typedef struct {
@@ -54,6 +69,7 @@ typedef struct {
   int32_t holding, have_cmd, stopped;
   int32_t late;        /* the hold is for stamps apart by over BRIDGE_CMD_HORIZON */
   nds_panda_reflex reflex;  /* the newest stop's */
+  bridge_sample stop_sample[2]; /* how its step's setpoint was sampled, and the step's before */
 } bridge_report;
 
 #define BRIDGE_LOOP_REPORT_STEPS 100
@@ -73,6 +89,7 @@ typedef struct {
   bridge_cmd last, prev; /* the newest command and the one before it */
   int have_prev;
   int silent;          /* the newest command's silence is reported */
+  bridge_sample sample[2]; /* this step's, and the step's before */
   uint64_t cmd_version;
   int have_cmd, holding;
   double hold[2];
