@@ -85,14 +85,15 @@ typedef struct {
  * are a rollout step apart (the position between them moves by up to h^2 a / 8). */
 #define NDS_PLANNER_WS_SLACK 0.002
 
-/* How far (m) position pos, and a brake from it at velocity vel, get beyond the box plus
- * the executor's margin less the slack; a brake travels at most 15/16 v^2 / a_max
- * along each axis (nd_exec.c), here with the planner's a_max, below the executor's. */
+/* How far (m) position pos, and a brake from it at velocity vel (NULL: none), get beyond the
+ * box plus the executor's margin less the slack. A brake from (v, 0, 0) travels 15/16 |v|
+ * v / a_max (nd_exec.c), here with the planner's a_max, below the executor's. */
 static double ws_outside(const nds_planner_cfg *c, const double pos[2], const double vel[2]) {
   const double m = ND_EXEC_WS_MARGIN - NDS_PLANNER_WS_SLACK;
+  const double speed = vel ? hypot(vel[0], vel[1]) : 0.0;
   double worst = -INFINITY;
   for (int ax = 0; ax < 2; ax++) {
-    const double brake = vel ? 15.0 / 16.0 * vel[ax] * fabs(vel[ax]) / c->a_max : 0.0;
+    const double brake = vel ? 15.0 / 16.0 * speed * vel[ax] / c->a_max : 0.0;
     const double lo = fmin(pos[ax], pos[ax] + brake), hi = fmax(pos[ax], pos[ax] + brake);
     worst = fmax(worst, fmax((c->ws_lo[ax] - m) - lo, hi - (c->ws_hi[ax] + m)));
   }

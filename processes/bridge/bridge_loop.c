@@ -149,7 +149,10 @@ void bridge_loop_step(bridge_loop *b, double now, int64_t utime) {
   if (out.robot.stopped != b->rep.stopped) {
     b->rep.stopped = out.robot.stopped;
     b->rep.stops += out.stopped_now;
-    if (out.stopped_now) b->rep.reflex = out.robot.reflex, memcpy(b->rep.stop_sample, b->sample, sizeof(b->sample));
+    if (out.stopped_now) {
+      b->rep.reflex = out.robot.reflex;
+      memcpy(b->rep.stop_sample, b->sample, sizeof(b->sample));
+    }
     post = 1;
   }
 
