@@ -43,10 +43,10 @@ static void use_ee_cmd(void *user, const nudge_ee_cmd_t *msg) {
     }
   bridge_cmd c;
   for (int k = 0; k < 2; k++) {
-    c.p[k] = msg->p[k];
-    c.v[k] = msg->v[k];
-    c.a[k] = msg->a[k];
-    c.j[k] = msg->j[k];
+    c.sp[k][ND_P] = msg->p[k];
+    c.sp[k][ND_V] = msg->v[k];
+    c.sp[k][ND_A] = msg->a[k];
+    c.sp[k][ND_J] = msg->j[k];
   }
   /* The future on the command's own clock: 0 is its utime. */
   c.f.t_seg_end = 1e-6 * (double)(msg->seg_end_utime - msg->utime);
@@ -99,7 +99,7 @@ void bridge_io_report(bridge_io *io, uint64_t *version, const nd_rtloop_stats *l
   bridge_report *r = &io->rep;
   if (nd_mailbox_take(&io->b->report, version, r, sizeof(*r)) != (int)sizeof(*r)) return;
   if (r->holding != io->holding) {
-    if (r->holding && r->late)
+    if (r->holding && r->apart)
       fprintf(stderr, PROG ": EE_CMD stamped over %g ms ahead of its arrival (the clocks "
               "disagree): the robot holds its setpoint at (%.4f, %.4f)\n",
               1e3 * BRIDGE_CMD_HORIZON, r->hold_pos[0], r->hold_pos[1]);

@@ -37,16 +37,13 @@ void bridge_loop_report_post(bridge_loop *b) {
 /* Command c's trajectory h s after its time into sp (bridge_loop.h: Taylor terms near it,
  * its future beyond; h < 0 only down to -BRIDGE_CMD_HORIZON, by the terms). */
 static void sample(const bridge_cmd *c, double h, double sp[2][4]) {
-  double s[2][4];
-  for (int k = 0; k < 2; k++)
-    s[k][ND_P] = c->p[k], s[k][ND_V] = c->v[k], s[k][ND_A] = c->a[k], s[k][ND_J] = c->j[k];
   if (h > BRIDGE_CMD_TAYLOR) {
-    nd_exec_future_eval((const double(*)[4])s, 0.0, &c->f, h, sp);
+    nd_exec_future_eval((const double(*)[4])c->sp, 0.0, &c->f, h, sp);
     return;
   }
   h = fmax(h, -BRIDGE_CMD_HORIZON);
   for (int k = 0; k < 2; k++) {
-    const double p = s[k][ND_P], v = s[k][ND_V], a = s[k][ND_A], j = s[k][ND_J];
+    const double *s = c->sp[k], p = s[ND_P], v = s[ND_V], a = s[ND_A], j = s[ND_J];
     sp[k][ND_P] = p + h * (v + h * (a / 2 + h * j / 6));
     sp[k][ND_V] = v + h * (a + h * j / 2);
     sp[k][ND_A] = a + h * j;
@@ -73,19 +70,19 @@ static int setpoint(bridge_loop *b, double now, int64_t utime, double sp[2][4]) 
   int changed = 0;
   if (fresh && b->holding) {
     b->holding = 0;
-    b->rep.late = 0;
+    b->rep.apart = 0;
     nds_world_motion_start(b->world);
     changed = 1;
   } else if (!fresh && !b->holding) {
     /* The robot's own stop, not a commanded motion: its reflexes start afresh from it. */
     b->holding = 1;
     nds_world_motion_start(b->world);
-    b->rep.late = timely;
-    if (timely) b->hold[0] = b->sp_last[0], b->hold[1] = b->sp_last[1], b->rep.late_events++;
+    b->rep.apart = timely;
+    if (timely) b->hold[0] = b->sp_last[0], b->hold[1] = b->sp_last[1], b->rep.apart_events++;
     else nds_world_ee(b->world, b->hold), b->rep.hold_events++;
     changed = 1;
-  } else if (b->holding && b->rep.late && !timely) {
-    b->rep.late = 0;  /* late became stale: the commander is gone, the hold stays put */
+  } else if (b->holding && b->rep.apart && !timely) {
+    b->rep.apart = 0;  /* then stale: the commander is gone, the hold stays put */
     b->rep.hold_events++;
     changed = 1;
   }

@@ -21,7 +21,7 @@
 
 /* A validated EE_CMD as the loop needs it, stamped with its local arrival. */
 typedef struct {
-  double p[2], v[2], a[2], j[2];
+  double sp[2][4];      /* the setpoint [axis][p, v, a, j] at utime */
   nd_exec_future f;    /* what the executor committed to after it, times in s after utime */
   int64_t utime;       /* the time the setpoint is for, us */
   double arrival;      /* monotonic s */
@@ -63,11 +63,11 @@ typedef struct {
 /* What the loop reports, every BRIDGE_LOOP_REPORT_STEPS steps and at every hold or stop
  * change. Counters only grow. */
 typedef struct {
-  int64_t steps, resets, hold_events, late_events, silent_events, stops;
+  int64_t steps, resets, hold_events, apart_events, silent_events, stops;
   int64_t robot_states, frames, arm_states;
   double hold_pos[2];  /* the setpoint while holding */
   int32_t holding, have_cmd, stopped;
-  int32_t late;        /* the hold is for stamps apart by over BRIDGE_CMD_HORIZON */
+  int32_t apart;       /* the hold is for stamps apart by over BRIDGE_CMD_HORIZON */
   nds_panda_reflex reflex;  /* the newest stop's */
   bridge_sample stop_sample[2]; /* how its step's setpoint was sampled, and the step's before */
 } bridge_report;

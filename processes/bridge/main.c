@@ -115,7 +115,7 @@ int main(int argc, char **argv) {
                "%lld, dropped steps %lld, resets %lld, ring drops %llu\n",
           up, (long long)r->steps, r->steps / up, (long long)r->robot_states,
           (long long)r->frames, (long long)r->arm_states, (long long)r->stops,
-          (long long)r->silent_events, 1e3 * BRIDGE_CMD_HORIZON, (long long)r->late_events,
+          (long long)r->silent_events, 1e3 * BRIDGE_CMD_HORIZON, (long long)r->apart_events,
           (long long)io.st.received, (long long)io.st.rejected,
           (long long)io.refused_ws.count, ls.p50_us, ls.p99_us, ls.max_us,
           (long long)ls.overruns, (long long)ls.skipped, (long long)r->resets,

@@ -59,29 +59,18 @@ static void drain(drained *d) {
 
 /* A command to rest at (x, y): its future holds there. */
 static void post_cmd(double now, double x, double y) {
-  bridge_cmd c = {.p = {x, y}, .utime = U0 + (int64_t)llround((now - T0) * 1e6), .arrival = now};
+  bridge_cmd c = {.sp = {{x}, {y}}, .utime = U0 + (int64_t)llround((now - T0) * 1e6),
+                  .arrival = now};
   c.f.key[0] = c.f.hold[0] = x;
   c.f.key[1] = c.f.hold[1] = y;
   nd_mailbox_post(&g_b.cmd, &c, sizeof c);
 }
 
-/* The command an executor ex sends for its setpoint sp at synthetic time t, as
- * exec_loop.c puts it in an EE_CMD and bridge_io.c takes it (the future on the command's
- * own clock, microsecond stamps), arriving at t. */
-static bridge_cmd exec_cmd(const nd_exec *ex, const double sp[2][4], double t) {
-  bridge_cmd c = {.utime = U0 + (int64_t)llround(t * 1e6), .arrival = T0 + t};
-  for (int k = 0; k < 2; k++)
-    c.p[k] = sp[k][ND_P], c.v[k] = sp[k][ND_V], c.a[k] = sp[k][ND_A], c.j[k] = sp[k][ND_J];
-  nd_exec_future f;
-  nd_exec_future_get(ex, &f);
-  c.f = f;
-  c.f.t_seg_end = 1e-6 * (double)llround(1e6 * (f.t_seg_end - t));
-  c.f.t_brake = 1e-6 * (double)llround(1e6 * (f.t_brake - t));
-  c.f.t_rest = 1e-6 * (double)llround(1e6 * (f.t_rest - t));
-  return c;
-}
+/* The executor feeding the lab bridge (lab_bridge starts it at rest at the sphere). */
+static nd_exec_cfg g_ec;
+static nd_exec g_ex;
 
-/* The lab world's bridge, fed from a fresh start. */
+/* The lab world's bridge and its executor, fed from a fresh start. */
 static nds_world *lab_bridge(void) {
   char err[256];
   nds_world_cfg wc;
@@ -89,7 +78,37 @@ static nds_world *lab_bridge(void) {
   nds_world *w = nds_world_create(&wc, err, sizeof err);
   if (!w) fail_msg("%s", err);
   bridge_loop_init(&g_b, w, 0.1);
+  g_ec = nd_exec_cfg_default();
+  nd_exec_init(&g_ex, (const double[2]){-0.10, 0.0}, 0.0);
   return w;
+}
+
+/* g_ex's next plan: toward key with duration T, from synthetic time t. */
+static void exec_plan(double t, const double key[4], double T) {
+  char err[256];
+  if (nd_exec_plan(&g_ex, &g_ec, t, key, T, err, sizeof err)) fail_msg("%s", err);
+}
+
+/* The command g_ex sends at synthetic time t, as exec_loop.c puts it in an EE_CMD and
+ * bridge_io.c takes it (the future on the command's own clock, microsecond stamps),
+ * arriving at t. */
+static bridge_cmd exec_send(double t) {
+  bridge_cmd c = {.utime = U0 + (int64_t)llround(t * 1e6), .arrival = T0 + t};
+  nd_exec_step(&g_ex, &g_ec, t, 0, c.sp);
+  nd_exec_future f;
+  nd_exec_future_get(&g_ex, &f);
+  c.f = f;
+  c.f.t_seg_end = 1e-6 * (double)llround(1e6 * (f.t_seg_end - t));
+  c.f.t_brake = 1e-6 * (double)llround(1e6 * (f.t_brake - t));
+  c.f.t_rest = 1e-6 * (double)llround(1e6 * (f.t_rest - t));
+  return c;
+}
+
+/* How far the bridge's last setpoint is from executor ex's trajectory at t (m). */
+static double setpoint_off(const nd_exec *ex, double t) {
+  double want[2][4];
+  nd_exec_eval(ex, t, want);
+  return hypot(g_b.sp_last[0] - want[0][ND_P], g_b.sp_last[1] - want[1][ND_P]);
 }
 
 /* The lab world's arm fed an executor's path (x moves 10 cm and back, two rest-to-rest
@@ -101,11 +120,7 @@ static nds_world *lab_bridge(void) {
  * it. */
 static void test_lab_jittered_commands(void **state) {
   (void)state;
-  char err[256];
   nds_world *w = lab_bridge();
-  const nd_exec_cfg cfg = nd_exec_cfg_default();
-  nd_exec ex;
-  nd_exec_init(&ex, (const double[2]){-0.10, 0.0}, 0.0);
   enum { STEPS = 3000, BACK = 1400, JUMP = 2500 };
   uint64_t rng = 12345;
   bridge_cmd late = {0};
@@ -114,21 +129,17 @@ static void test_lab_jittered_commands(void **state) {
   drained d = {0};
   for (int k = 0; k < STEPS; k++) {
     const double t = 1e-3 * k, now = T0 + t;
-    if (k == 0 || k == BACK) {
-      const double key[4] = {k ? -0.10 : 0.0, 0.0, 0.0, 0.0};
-      if (nd_exec_plan(&ex, &cfg, t, key, 1.4, err, sizeof err)) fail_msg("%s", err);
-    }
-    double sp[2][4];
-    nd_exec_step(&ex, &cfg, t, 0, sp);
-    bridge_cmd c = exec_cmd(&ex, (const double(*)[4])sp, t);
-    if (k == JUMP) c.p[0] += 5e-4;
+    if (k == 0 || k == BACK) exec_plan(t, (const double[4]){k ? -0.10 : 0.0, 0.0, 0.0, 0.0}, 1.4);
+    bridge_cmd c = exec_send(t);
+    const double x = c.sp[0][ND_P];
+    if (k == JUMP) c.sp[0][ND_P] += 5e-4;
     if (have_late) nd_mailbox_post(&g_b.cmd, &late, sizeof late), have_late = 0;
     rng = rng * 6364136223846793005ULL + 1442695040888963407ULL;
     if ((rng >> 33) & 1) nd_mailbox_post(&g_b.cmd, &c, sizeof c);
     else late = c, have_late = 1;
     bridge_loop_step(&g_b, now, c.utime);
     drain(&d);
-    if (k > 200 && k < JUMP) err_max = fmax(err_max, fabs(d.ee[0] - sp[0][ND_P]));
+    if (k > 200 && k < JUMP) err_max = fmax(err_max, fabs(d.ee[0] - x));
     if (k == JUMP - 1) {
       printf("lab_jitter_stops %lld count\nlab_jitter_track_err_max %.4f m\n",
              (long long)g_b.rep.stops, err_max);
@@ -150,14 +161,15 @@ static void test_lab_jittered_commands(void **state) {
 
 /* A live-like executor: every 30 ms a new plan toward where a target speeding up to 0.2 m/s
  * along x and swaying 6 cm in y will be in 0.15 s, each a fresh 0.15 s segment (the high
- * snap of a live segment's start; up to 1.9 m/s^2, within the arm's 2). The target's state
- * at t into key. */
-static void target_key(double t, double key[4]) {
-  const double w = 2 * M_PI / 1.2;
-  key[0] = -0.10 + 0.2 * t * t / (t + 0.3);
-  key[1] = 0.03 * (1 - cos(w * t));
-  key[2] = 0.2 * t * (t + 0.6) / ((t + 0.3) * (t + 0.3));
-  key[3] = 0.03 * w * sin(w * t);
+ * snap of a live segment's start; up to 1.9 m/s^2, within the arm's 2); g_ex's command
+ * at step k. */
+static bridge_cmd live_send(int k) {
+  const double t = 1e-3 * k, tk = t + 0.15, w = 2 * M_PI / 1.2;
+  if (k % 30 == 0)
+    exec_plan(t, (const double[4]){-0.10 + 0.2 * tk * tk / (tk + 0.3), 0.03 * (1 - cos(w * tk)),
+                                   0.2 * tk * (tk + 0.6) / ((tk + 0.3) * (tk + 0.3)),
+                                   0.03 * w * sin(w * tk)}, 0.15);
+  return exec_send(t);
 }
 
 /* The commander falls silent, as the executor does when the machine stalls: for 13 ms and
@@ -169,11 +181,7 @@ static void target_key(double t, double key[4]) {
  * the robot never holds. */
 static void test_lab_commander_silent(void **state) {
   (void)state;
-  char err[256];
   nds_world *w = lab_bridge();
-  const nd_exec_cfg cfg = nd_exec_cfg_default();
-  nd_exec ex;
-  nd_exec_init(&ex, (const double[2]){-0.10, 0.0}, 0.0);
   enum { STEPS = 1200 };
   double off_max = 0, off_silent = 0, off_taylor = 0, err_max = 0;
   bridge_cmd c = {0};
@@ -182,21 +190,14 @@ static void test_lab_commander_silent(void **state) {
     const double t = 1e-3 * k;
     const int silent = (k >= 300 && k < 313) || (k >= 600 && k < 645);
     if (!silent) {
-      if (k % 30 == 0) {
-        double key[4];
-        target_key(t + 0.15, key);
-        if (nd_exec_plan(&ex, &cfg, t, key, 0.15, err, sizeof err)) fail_msg("%s", err);
-      }
-      double sp[2][4];
-      nd_exec_step(&ex, &cfg, t, 0, sp);
-      c = exec_cmd(&ex, (const double(*)[4])sp, t);
+      c = live_send(k);
       nd_mailbox_post(&g_b.cmd, &c, sizeof c);
     }
     bridge_loop_step(&g_b, T0 + t, U0 + (int64_t)k * 1000);
     drain(&d);
     double want[2][4];
-    nd_exec_eval(&ex, t, want);
-    const double off = hypot(g_b.sp_last[0] - want[0][ND_P], g_b.sp_last[1] - want[1][ND_P]);
+    nd_exec_eval(&g_ex, t, want);
+    const double off = setpoint_off(&g_ex, t);
     off_max = fmax(off_max, off);
     if (silent) {
       off_silent = fmax(off_silent, off);
@@ -204,7 +205,9 @@ static void test_lab_commander_silent(void **state) {
       const double h = t - 1e-6 * (double)(c.utime - U0);
       double tay[2];
       for (int i = 0; i < 2; i++)
-        tay[i] = c.p[i] + h * (c.v[i] + h * (c.a[i] / 2 + h * c.j[i] / 6)) - want[i][ND_P];
+        tay[i] = c.sp[i][ND_P] +
+                 h * (c.sp[i][ND_V] + h * (c.sp[i][ND_A] / 2 + h * c.sp[i][ND_J] / 6)) -
+                 want[i][ND_P];
       off_taylor = fmax(off_taylor, hypot(tay[0], tay[1]));
     }
     if (k > 100) err_max = fmax(err_max, hypot(d.ee[0] - want[0][ND_P], d.ee[1] - want[1][ND_P]));
@@ -217,7 +220,7 @@ static void test_lab_commander_silent(void **state) {
   assert_true(off_max < 1e-6);
   assert_int_equal(g_b.rep.stops, 0);
   assert_int_equal(g_b.rep.silent_events, 1);
-  assert_int_equal(g_b.rep.late_events + g_b.rep.hold_events, 0);
+  assert_int_equal(g_b.rep.apart_events + g_b.rep.hold_events, 0);
   assert_int_equal(d.mode, NUDGE_ROBOT_STATE_T_MODE_TRACKING);
   assert_true(err_max < 5e-3);
   nds_world_free(w);
@@ -230,9 +233,7 @@ static double g_off_max;
 
 static void check_tick(void *ctx, const nd_rtloop_tick *t) {
   bridge_loop_tick(ctx, t);
-  double want[2][4];
-  nd_exec_eval(&g_ref, 1e-3 * (double)llround((t->deadline - T0) * 1e3), want);
-  g_off_max = fmax(g_off_max, hypot(g_b.sp_last[0] - want[0][ND_P], g_b.sp_last[1] - want[1][ND_P]));
+  g_off_max = fmax(g_off_max, setpoint_off(&g_ref, 1e-3 * (double)llround((t->deadline - T0) * 1e3)));
 }
 
 /* The whole machine stalls, the bridge's loop and the executor alike, for 45 ms and 60 ms;
@@ -244,7 +245,6 @@ static void check_tick(void *ctx, const nd_rtloop_tick *t) {
  * loop skips 67 deadlines and a reflex stops the arm. */
 static void test_lab_machine_stall(void **state) {
   (void)state;
-  char err[256];
   nds_world *w = lab_bridge();
   memset(&g_l, 0, sizeof g_l);
   nd_rtloop_cfg_default(&g_l.cfg);
@@ -254,32 +254,21 @@ static void test_lab_machine_stall(void **state) {
   g_l.ctx = &g_b;
   nd_mailbox_init(&g_l.stats);
   nd_jitter_reset(&g_l.jit);
-  const nd_exec_cfg cfg = nd_exec_cfg_default();
-  nd_exec ex;
-  nd_exec_init(&ex, (const double[2]){-0.10, 0.0}, 0.0);
-  g_ref = ex;
+  g_ref = g_ex;
   g_off_max = 0;
   enum { STEPS = 1200, S1 = 400, S1_END = 445, S2 = 800, S2_END = 860 };
   int64_t next = (int64_t)(T0 * 1e9);
   drained d = {0};
   for (int k = 0; k < STEPS; k++) {
     if ((k >= S1 && k < S1_END) || (k >= S2 && k < S2_END)) continue;  /* all asleep */
-    const double t = 1e-3 * k;
     const int bridge_first = k == S2_END;
     const int64_t now_ns = (int64_t)(T0 * 1e9) + (int64_t)k * 1000000 + 20000;
     const int64_t utime_now = U0 + (now_ns - (int64_t)(T0 * 1e9)) / 1000;
     if (bridge_first) nd_rtloop_wake(&g_l, &next, now_ns, utime_now), drain(&d);
-    if (k % 30 == 0) {
-      double key[4];
-      target_key(t + 0.15, key);
-      if (nd_exec_plan(&ex, &cfg, t, key, 0.15, err, sizeof err)) fail_msg("%s", err);
-    }
-    double sp[2][4];
-    nd_exec_step(&ex, &cfg, t, 0, sp);
-    bridge_cmd c = exec_cmd(&ex, (const double(*)[4])sp, t);
+    const bridge_cmd c = live_send(k);
     nd_mailbox_post(&g_b.cmd, &c, sizeof c);
     if (!bridge_first) nd_rtloop_wake(&g_l, &next, now_ns, utime_now), drain(&d);
-    g_ref = ex;
+    g_ref = g_ex;
   }
   printf("machine_stall_setpoint_off_max %.2e m\nmachine_stall_skipped %lld count\n"
          "machine_stall_stops %lld count\n", g_off_max, (long long)g_l.st.skipped,
@@ -288,7 +277,7 @@ static void test_lab_machine_stall(void **state) {
   assert_int_equal(g_b.rep.steps, STEPS);
   assert_true(g_off_max < 1e-6);
   assert_int_equal(g_b.rep.stops, 0);
-  assert_int_equal(g_b.rep.late_events + g_b.rep.hold_events, 0);
+  assert_int_equal(g_b.rep.apart_events + g_b.rep.hold_events, 0);
   assert_int_equal(g_b.rep.silent_events, 1);  /* the bridge woke first: it saw the silence */
   nds_world_free(w);
 }
@@ -363,7 +352,7 @@ static void test_step_allocates_nothing(void **state) {
   assert_true(held_still > (BACK - STALE - 1200) * 0.95);
   assert_int_equal(g_b.rep.silent_events, 1);  /* 20 ms after the commands stopped */
   assert_int_equal(g_b.rep.hold_events, 1);    /* and the hold when they went stale */
-  assert_int_equal(g_b.rep.late_events, 0);
+  assert_int_equal(g_b.rep.apart_events, 0);
   assert_int_equal(g_b.holding, 0);
   nds_world_free(w);
 }
