@@ -241,8 +241,8 @@ static void check_tick(void *ctx, const nd_rtloop_tick *t) {
  * first. Run through nd_rtloop with the bridge's catch-up, every missed deadline gets its
  * world step, each sampling the command it is after (the one before the newest, when the
  * executor woke first), so the setpoint keeps to the executor's trajectory to 1 um at every
- * deadline and no reflex stops the arm. With nd_rtloop's default catch-up of 20 steps the
- * loop skips 67 deadlines and a reflex stops the arm. */
+ * deadline, none is skipped, and no reflex stops the arm (a skipped one would move the
+ * setpoint by the skipped time in one step: decisions#catch-up). */
 static void test_lab_machine_stall(void **state) {
   (void)state;
   nds_world *w = lab_bridge();

@@ -240,7 +240,7 @@ static void test_speed_limit(void **state) {
  * outward a brake that does: the executor refuses either beyond its margin
  * (ND_EXEC_EBOX). With the sphere 2 cm from the edge running toward it at 0.3 m/s, every
  * plan's first keypoint is one the lab's executor, on that same trajectory, accepts
- * (nd_exec_plan); a planner blind to the box had 7 of these 18 refused. */
+ * (nd_exec_plan). */
 static void test_workspace_edge(void **state) {
   fixture *f = *state;
   nd_exec_cfg ec = nd_exec_cfg_default();
