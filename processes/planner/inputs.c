@@ -74,6 +74,7 @@ static void use_task(void *user, const nudge_task_t *m) {
   p->task = *m;
   p->active = 1;
   p->release_due = 0;
+  p->keep_clear = 0;
   p->task_t0 = ndp_mono();
   p->task_plans = 0;
   p->task_ms_sum = p->task_ms_max = p->task_stale = 0.0;

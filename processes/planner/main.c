@@ -74,8 +74,9 @@ int main(int argc, char **argv) {
                "so more of N is simulated where the limits are low"},
       {"release", ND_OPT_DOUBLE, &o.release, 0.0, 0.1, .arg = "M",
        .help = "when a task ends, one last plan brings the sphere to rest this far clear of "
-               "the object's sides (where it is, if it already is): held pressing on it, the "
-               "object would creep on into the next task"},
+               "the object's sides (where it is, if it already is), and again while idle if the "
+               "object comes within 3/4 of that: held pressing on it, the object would creep "
+               "on into the next task"},
       {"segment-time", ND_OPT_DOUBLE, &pc.T, 0.05, 2.0, .arg = "S",
        .help = "duration of each keypoint's minimum-snap segment (the horizon is M times it); "
                "slower arms need longer ones to move as far"},
@@ -163,7 +164,9 @@ int main(int argc, char **argv) {
     now = ndp_mono();
     if (!p.active) {
       p.st.state = "idle";
-      if (p.release_due && planner_release(&p, now, err, sizeof(err))) goto done;
+      if (p.release_due ? planner_release(&p, now, err, sizeof(err))
+                        : planner_keep_clear(&p, now, err, sizeof(err)))
+        goto done;
     } else if (!planner_state_fresh(&p, now)) {
       p.st.state = "stale";
       p.task_stale += now - last;

@@ -151,19 +151,16 @@ int planner_plan_once(planner_proc *p, double now, char *err, int errlen) {
   return 0;
 }
 
-int planner_release(planner_proc *p, double now, char *err, int errlen) {
-  const planner_opts *o = p->o;
-  if (!ndp_input_fresh(&p->in_mocap, now, o->state_timeout) ||
-      !ndp_input_fresh(&p->in_rs, now, o->state_timeout))
-    return 0;
-  p->release_due = 0;
-  const nds_planner_cfg *pc = nds_planner_config(p->planner);
-  const double yaw = nd_quat_yaw(p->mocap.obj_quat);
-  const nd_release_box b = {.x = p->mocap.obj_pos[0], .y = p->mocap.obj_pos[1], .yaw = yaw,
-                            .half = {p->obj_half[0], p->obj_half[1]}};
-  double key[2];
-  const double moved = nd_release_target(&b, p->ee_radius, o->release, p->rs.ee_pos, pc->ws_lo,
-                                         pc->ws_hi, key);
+/* The object as nd_release sees it: its newest MOCAP pose and the model's sides. */
+static nd_release_box release_box(const planner_proc *p) {
+  return (nd_release_box){.x = p->mocap.obj_pos[0], .y = p->mocap.obj_pos[1],
+                          .yaw = nd_quat_yaw(p->mocap.obj_quat),
+                          .half = {p->obj_half[0], p->obj_half[1]}};
+}
+
+/* Publish the PLAN that rests the sphere at key[2] (the object b predicted to stay). */
+static int publish_release(planner_proc *p, double now, const nd_release_box *b,
+                           const double key[2], char *err, int errlen) {
   double sp0[2][4];
   start_setpoint(p, now, sp0);
   nudge_plan_t m;
@@ -174,12 +171,57 @@ int planner_release(planner_proc *p, double now, char *err, int errlen) {
   m.keypoints[0][0] = key[0];
   m.keypoints[0][1] = key[1];
   m.T = PLANNER_RELEASE_T;
-  m.predicted[0] = b.x;
-  m.predicted[1] = b.y;
-  m.predicted[2] = yaw;
+  m.predicted[0] = b->x;
+  m.predicted[1] = b->y;
+  m.predicted[2] = b->yaw;
   if (publish(p, &m, err, errlen)) return -1;
+  p->released_at = now;
+  return 0;
+}
+
+int planner_release(planner_proc *p, double now, char *err, int errlen) {
+  const planner_opts *o = p->o;
+  if (!ndp_input_fresh(&p->in_mocap, now, o->state_timeout) ||
+      !ndp_input_fresh(&p->in_rs, now, o->state_timeout))
+    return 0;
+  p->release_due = 0;
+  const nds_planner_cfg *pc = nds_planner_config(p->planner);
+  const nd_release_box b = release_box(p);
+  double key[2];
+  const double moved = nd_release_target(&b, p->ee_radius, o->release, p->rs.ee_pos, pc->ws_lo,
+                                         pc->ws_hi, key);
+  if (publish_release(p, now, &b, key, err, errlen)) return -1;
+  p->keep_clear = o->release > 0.0;
   fprintf(stderr, PROG ": task %lld: released: the sphere rests at (%+.3f, %+.3f) m, %.1f mm "
           "out, at least %g m clear of the object\n", (long long)p->task.task_id, key[0], key[1],
           1e3 * moved, o->release);
+  return 0;
+}
+
+int planner_keep_clear(planner_proc *p, double now, char *err, int errlen) {
+  const planner_opts *o = p->o;
+  if (!p->keep_clear || now - p->released_at < PLANNER_RECLEAR_WAIT ||
+      !ndp_input_fresh(&p->in_mocap, now, o->state_timeout) ||
+      !ndp_input_fresh(&p->in_rs, now, o->state_timeout))
+    return 0;
+  const nd_release_box b = release_box(p);
+  double n[2];
+  const double gap = nd_release_gap(&b, p->ee_radius, p->rs.ee_pos, n);
+  if (gap >= PLANNER_RECLEAR * o->release) return 0;
+  const nds_planner_cfg *pc = nds_planner_config(p->planner);
+  double key[2];
+  const double moved = nd_release_target(&b, p->ee_radius, o->release, p->rs.ee_pos, pc->ws_lo,
+                                         pc->ws_hi, key);
+  if (moved < PLANNER_RECLEAR_MIN) {
+    p->keep_clear = 0;
+    fprintf(stderr, PROG ": task %lld: the object is %.1f mm from the sphere, which the keypoint "
+            "box keeps from moving clear: left where it is\n", (long long)p->task.task_id,
+            1e3 * gap);
+    return 0;
+  }
+  if (publish_release(p, now, &b, key, err, errlen)) return -1;
+  fprintf(stderr, PROG ": task %lld: the object came within %.1f mm of the sphere after the "
+          "release: sent clear again, to (%+.3f, %+.3f) m, %.1f mm out\n",
+          (long long)p->task.task_id, 1e3 * gap, key[0], key[1], 1e3 * moved);
   return 0;
 }

@@ -7,7 +7,8 @@
  * The process keeps the newest world state from MOCAP (object pose) and ROBOT_STATE
  * (end-effector), the executor's setpoint from EE_CMD, the goal from TASK and theta from
  * PARAMS. While a task is active and the state is fresh it plans back to back; when the
- * task ends, one release plan takes the sphere clear of the object. Planning
+ * task ends, one release plan takes the sphere clear of the object, and while idle the
+ * planner sends it clear again if the object, still sliding, comes back near. Planning
  * runs in the main thread between LCM drains: it is not a 1 kHz process, and the queues
  * are sized so a plan's duration of input fits in them. */
 #ifndef PLANNER_H
@@ -47,6 +48,13 @@ typedef struct {
 #define PLANNER_PRE_MAX 256
 /* The release's segment duration, s: the executor lengthens it as its limits need. */
 #define PLANNER_RELEASE_T 0.1
+/* After a release the object may still slide and turn a corner onto the resting sphere:
+ * while idle, a gap below PLANNER_RECLEAR x --release sends the sphere clear again, at
+ * most once per PLANNER_RECLEAR_WAIT s (a release's segment gets time to move it first).
+ * A target the keypoint box keeps within PLANNER_RECLEAR_MIN m of the sphere ends it. */
+#define PLANNER_RECLEAR 0.75
+#define PLANNER_RECLEAR_WAIT 0.25
+#define PLANNER_RECLEAR_MIN 1e-3
 
 /* Niceness the planning threads add to the process's: below its LCM receive thread. */
 #define PLANNER_COMPUTE_NICE 5
@@ -83,6 +91,8 @@ typedef struct {
   double task_stale;           /* s of the task spent without fresh state */
   int edge_warned;             /* the task's object was logged beyond the sphere's reach */
   int release_due;             /* the task ended: one PLAN sends the sphere clear (nd_release) */
+  int keep_clear;              /* released and idle: the sphere is kept clear of the object */
+  double released_at;          /* when the last release was published, s (ndp_mono) */
   double obj_half[2], ee_radius; /* the model's object half sides and sphere radius, m */
 
   double plan_s;               /* recent plan time, s (moving average) */
@@ -119,5 +129,10 @@ int planner_plan_once(planner_proc *p, double now, char *err, int errlen);
  * PLAN of one keypoint at rest clear of the object (iterations 0; nd_release). Return 0,
  * or -1 with a message (LCM). */
 int planner_release(planner_proc *p, double now, char *err, int errlen);
+
+/* While idle after a release: if the object has come closer to the sphere than
+ * PLANNER_RECLEAR x --release, publish the release again (PLANNER_RECLEAR_*). Return 0, or
+ * -1 with a message (LCM). */
+int planner_keep_clear(planner_proc *p, double now, char *err, int errlen);
 
 #endif

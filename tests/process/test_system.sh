@@ -15,7 +15,10 @@
 #    only asserted below 500 ms, i.e. the loop is alive: a shared 2-core VM stalls a
 #    SCHED_FIFO thread for tens of ms now and then (71 ms seen in CI), and timed
 #    assertions flake there; nothing of the run is left afterwards.
-# 2. `nudge-up run`, SIGINT after a few seconds: exit 0, every process it logged is gone.
+# 2. `nudge-up run`: a task, then PLANs from outside press the resting sphere onto the
+#    object; the planner sends it clear again and the next recorded task starts with the
+#    sphere at least 5 mm from the object. Then SIGINT: exit 0, every process it logged is
+#    gone.
 set -u
 PT_NAME=test_system
 . "$(dirname "${BASH_SOURCE[0]}")/../tools/process-lib.sh"
@@ -57,7 +60,22 @@ pt_none_left "$DEMO"
 pt_spawn up "$PT_BIN/nudge-up" run --log-dir "$RUN" 2>"$PT_WORK/run.err"
 if pt_up_wait "$RUN" 30 "$up"; then
   pt_ok "nudge-up run: all processes up"
-  sleep 3
+  # The sphere kept clear. After a task's release, valid PLANs drive the sphere through
+  # where the object lies and hold it pressing there, as an object that slides or turns
+  # onto the resting sphere leaves it. When they stop, the planner sends the sphere clear
+  # again: the next record starts with it at least half of --release (5 mm) from the object.
+  "$PT_BIN/nudge-tasks" --goal 0.05,0,0 --eps 1e-3 --tau "$(pt_slow 2)" >"$PT_WORK/clear-task.out" 2>&1 ||
+    pt_fail "nudge-tasks (the task before the release) failed: $(tail -n 3 "$PT_WORK/clear-task.out")"
+  pt_wait_for 5 grep -q ': released: ' "$RUN/planner.log" || pt_fail "no release after the task"
+  "$PT_INJ" --plan-to 0.08,0 --repeat 40 --gap-ms 20 >/dev/null || pt_fail "nudge-inject --plan-to failed"
+  "$PT_BIN/nudge-tasks" --goal 0.3,0,0 --tau 0.5 --record "$PT_WORK/clear.nrb" \
+    >"$PT_WORK/clear-rec.out" 2>&1 || pt_fail "nudge-tasks --record failed: $(tail -n 3 "$PT_WORK/clear-rec.out")"
+  again=$(grep -m1 -o 'the object came within .*' "$RUN/planner.log")
+  pt_check "the planner sent the sphere clear again (${again:-no such line})" test -n "$again"
+  pt_val g0 buffer "$PT_WORK/clear.nrb" record_start_gap_min
+  pt_figure clear_start_gap "$g0" m
+  pt_check "the next record starts with the sphere clear of the object (${g0:-?} m)" \
+    awk -v g="$g0" 'BEGIN { exit !(g != "" && g > 0.005) }'
   pids=$(pt_logged_pids "$RUN" | tr '\n' ' ')
   pt_figure run_processes "$(echo $pids | wc -w)" count
   t_int=$(pt_now_us)
