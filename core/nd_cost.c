@@ -56,12 +56,31 @@ double nd_cost_edge(const nd_cost_weights *w, const nd_goal *goal, const double 
   return e;
 }
 
-double nd_cost_plan(const nd_cost_weights *w, const nd_goal *goal, const double obj_xy[2],
-                    double obj_yaw, const double ee_xy[2], double acc_sq_mean) {
+double nd_cost_plan(const nd_cost_weights *w, const nd_goal *goal, double task,
+                    const double obj_xy[2], const double ee_xy[2], double acc_sq_mean) {
   double lead[2];
   nd_cost_lead_point(w->prox_lead, goal, obj_xy, lead);
-  return nd_task_error(w, goal, obj_xy, obj_yaw) + w->w_prox * nd_cost_prox(lead, ee_xy) +
-         w->w_acc * acc_sq_mean;
+  return task + w->w_prox * nd_cost_prox(lead, ee_xy) + w->w_acc * acc_sq_mean;
+}
+
+/* The task ends the moment its error falls below eps, so a plan is worth when it gets
+ * there; the final state alone rates a plan that arrives at once like one that arrives at
+ * the horizon's end, and the receding horizon then puts arrival off at every re-plan
+ * (doc/decisions.md#arrival). Counting only a stay below eps keeps a push that runs the
+ * object through the goal from scoring as arriving. */
+double nd_cost_arrival(const nd_cost_weights *w, const nd_goal *goal, const double (*at)[3],
+                       int n) {
+  const double eps = goal->eps;
+  if (!(eps > 0.0)) return nd_task_error(w, goal, at[n - 1], at[n - 1][2]);
+  double stay = 0.0, best = INFINITY;
+  for (int k = n - 1; k >= 0; k--) {
+    const double e = nd_task_error(w, goal, at[k], at[k][2]);
+    if (isnan(e)) return INFINITY;
+    stay = fmax(stay, e);
+    const double c = stay + eps * (stay < eps ? (double)(k + 1) / n : 1.0);
+    if (c < best) best = c;
+  }
+  return best;
 }
 
 double nd_task_error(const nd_cost_weights *w, const nd_goal *goal, const double obj_xy[2],

@@ -65,6 +65,18 @@ static void ee_offset(const nds_model *nm, double off[2]) {
     off[k] = nm->m->body_pos[3 * nm->ee_body + k] - nm->m->qpos0[nm->ee_qpos[k]];
 }
 
+/* After step n of nsteps: the object's pose into out->obj_at where a sample falls. */
+static void sample_obj(const nds_model *nm, const mjData *d, long n, long nsteps,
+                       nds_rollout_out *out) {
+  for (int k = 0; k < NDS_ROLLOUT_NS; k++) {
+    if ((k + 1) * nsteps / NDS_ROLLOUT_NS != n + 1) continue;
+    const mjtNum *q = d->qpos + nm->obj_qpos;
+    out->obj_at[k][0] = q[0];
+    out->obj_at[k][1] = q[1];
+    out->obj_at[k][2] = nd_quat_yaw(q + 3);
+  }
+}
+
 static int warned(const mjData *d) {
   for (int w = 0; w < mjNWARNING; w++)
     if (d->warning[w].number != WARN_START) return 1;
@@ -139,12 +151,14 @@ void nds_rollout_ff(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
       }
       d->time += dt;
       skipped++;
+      sample_obj(nm, d, n, nsteps, out);
       continue;
     }
     d->qfrc_applied[nm->ee_dof[0]] = f[0];
     d->qfrc_applied[nm->ee_dof[1]] = f[1];
     mj_step(m, d);
     diverged = warned(d);
+    sample_obj(nm, d, n, nsteps, out);
   }
   if (!diverged && !(nd_all_finite(d->qpos, m->nq) && nd_all_finite(d->qvel, m->nv)))
     diverged = 1;

@@ -12,7 +12,11 @@
 #include "nds_model.h"
 #include "nds_state.h"
 
+/* Object poses a rollout samples along its horizon, at its (k + 1) / NDS_ROLLOUT_NS. */
+#define NDS_ROLLOUT_NS 8
+
 typedef struct {
+  double obj_at[NDS_ROLLOUT_NS][3]; /* object (x, y, yaw) at (k + 1) / NS of the horizon */
   double obj_xy[2];     /* final object position */
   double obj_yaw;       /* final object yaw */
   double ee_xy[2];      /* final sphere position */

@@ -56,7 +56,8 @@ int planner_plan_once(planner_proc *p, double now, char *err, int errlen) {
    * too. */
   double sp0[2][4];
   const int cmd_ok = start_setpoint(p, now, sp0);
-  const nd_goal goal = {.x = p->task.goal_x, .y = p->task.goal_y, .yaw = p->task.goal_yaw};
+  const nd_goal goal = {.x = p->task.goal_x, .y = p->task.goal_y, .yaw = p->task.goal_yaw,
+                        .eps = p->task.eps};
   if (!p->edge_warned) {
     const nds_planner_cfg *pc = nds_planner_config(p->planner);
     nd_cost_weights box = pc->w;

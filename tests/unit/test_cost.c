@@ -16,16 +16,16 @@ static void test_known_values(void **state) {
   const nd_cost_weights w = {.w_rot = 0.1, .w_prox = 0.01, .w_acc = 0.001};
   const double yaw = 0.3 + 3.14159265358979323846 / 6.0;
   assert_near(nd_task_error(&w, &g, obj, yaw), 0.25 + 0.1 * 0.25, 1e-15);
-  assert_near(nd_cost_plan(&w, &g, obj, yaw, ee, 40.0),
+  assert_near(nd_cost_plan(&w, &g, nd_task_error(&w, &g, obj, yaw), obj, ee, 40.0),
               0.25 + 0.1 * 0.25 + 0.01 * 0.0025 + 0.001 * 40.0, 1e-15);
   /* Each weight scales only its own term. */
   nd_cost_weights w2 = w;
   w2.w_acc = 0.0;
-  assert_near(nd_cost_plan(&w, &g, obj, yaw, ee, 40.0) - nd_cost_plan(&w2, &g, obj, yaw, ee, 40.0),
+  assert_near(nd_cost_plan(&w, &g, nd_task_error(&w, &g, obj, yaw), obj, ee, 40.0) - nd_cost_plan(&w2, &g, nd_task_error(&w2, &g, obj, yaw), obj, ee, 40.0),
               0.04, 1e-15);
   w2 = w;
   w2.w_prox = 0.0;
-  assert_near(nd_cost_plan(&w, &g, obj, yaw, ee, 40.0) - nd_cost_plan(&w2, &g, obj, yaw, ee, 40.0),
+  assert_near(nd_cost_plan(&w, &g, nd_task_error(&w, &g, obj, yaw), obj, ee, 40.0) - nd_cost_plan(&w2, &g, nd_task_error(&w2, &g, obj, yaw), obj, ee, 40.0),
               0.01 * 0.0025, 1e-15);
 }
 
@@ -52,9 +52,47 @@ static void test_lead_point(void **state) {
   nd_cost_weights w = {.w_rot = 0.0, .w_prox = 1.0, .w_acc = 0.0, .prox_lead = 0.08};
   const double obj[2] = {0.8, 0.2};
   const double behind[2] = {0.848, 0.264}, front[2] = {0.752, 0.136};
-  assert_near(nd_cost_plan(&w, &g, obj, 0.0, behind, 0.0), nd_cost_pos(obj, &g), 1e-15);
-  assert_near(nd_cost_plan(&w, &g, obj, 0.0, front, 0.0) - nd_cost_pos(obj, &g),
+  assert_near(nd_cost_plan(&w, &g, nd_task_error(&w, &g, obj, 0.0), obj, behind, 0.0), nd_cost_pos(obj, &g), 1e-15);
+  assert_near(nd_cost_plan(&w, &g, nd_task_error(&w, &g, obj, 0.0), obj, front, 0.0) - nd_cost_pos(obj, &g),
               4.0 * 0.08 * 0.08, 1e-15);
+}
+
+/* The task term by arrival: a plan that meets eps and stays scores by when it gets there
+ * (eps (k + 1) / n on top of its largest error from then on), below every plan that does
+ * not (its final error + eps); one that runs the object through the goal is not arriving;
+ * eps 0 is the final error alone. */
+static void test_arrival(void **state) {
+  (void)state;
+  const nd_cost_weights w = {.w_rot = 0.02};
+  nd_goal g = {.x = 0.1, .y = 0.0, .yaw = 0.0, .eps = 1e-3};
+  enum { N = 4 };
+  /* The object's x at each quarter of the horizon, y and yaw 0: errors (x - 0.1)^2. */
+  const double early[N][3] = {{0.09, 0, 0}, {0.1, 0, 0}, {0.1, 0, 0}, {0.1, 0, 0}};
+  const double late[N][3] = {{0.0, 0, 0}, {0.05, 0, 0}, {0.08, 0, 0}, {0.1, 0, 0}};
+  const double through[N][3] = {{0.05, 0, 0}, {0.1, 0, 0}, {0.15, 0, 0}, {0.2, 0, 0}};
+  const double short_of[N][3] = {{0.0, 0, 0}, {0.03, 0, 0}, {0.05, 0, 0}, {0.06, 0, 0}};
+  /* early: within eps (1e-4) from the first sample on. */
+  assert_near(nd_cost_arrival(&w, &g, early, N), 1e-4 + 1e-3 * 0.25, 1e-15);
+  /* late: 4e-4 at the third sample, 0 at the last: max 4e-4 from k = 2 (0.75 of the
+   * horizon), 0 at k = 3. */
+  assert_near(nd_cost_arrival(&w, &g, late, N), fmin(4e-4 + 1e-3 * 0.75, 1e-3), 1e-15);
+  assert_true(nd_cost_arrival(&w, &g, early, N) < nd_cost_arrival(&w, &g, late, N));
+  /* through: at the goal mid-horizon, 0.1 beyond at the end: not arriving. */
+  assert_near(nd_cost_arrival(&w, &g, through, N), 0.01 + 1e-3, 1e-15);
+  /* short of it: the final error + eps, above every arriving plan's 2 eps. */
+  assert_near(nd_cost_arrival(&w, &g, short_of, N), 0.0016 + 1e-3, 1e-15);
+  assert_true(nd_cost_arrival(&w, &g, late, N) < 2e-3);
+  /* A yaw error counts as nd_task_error does: 90 degrees off at the end is not arriving. */
+  const double turned[N][3] = {{0.1, 0, 0}, {0.1, 0, 0}, {0.1, 0, 0}, {0.1, 0, 1.5707963267948966}};
+  assert_near(nd_cost_arrival(&w, &g, turned, N), 0.02 + 1e-3, 1e-15);
+  /* Without eps, the final state's error: the paper's term. */
+  g.eps = 0.0;
+  assert_near(nd_cost_arrival(&w, &g, late, N), 0.0, 0.0);
+  assert_near(nd_cost_arrival(&w, &g, through, N), 0.01, 1e-15);
+  /* A NaN sample is never a good plan. */
+  g.eps = 1e-3;
+  const double bad[N][3] = {{0.1, 0, 0}, {NAN, 0, 0}, {0.1, 0, 0}, {0.1, 0, 0}};
+  assert_true(isinf(nd_cost_arrival(&w, &g, bad, N)));
 }
 
 /* L_edge on the lab's box [-0.15, 0.15] x [-0.30, 0.40] with the 8 cm lead: the object
@@ -159,6 +197,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_known_values),
       cmocka_unit_test(test_lead_point),
+      cmocka_unit_test(test_arrival),
       cmocka_unit_test(test_edge),
       cmocka_unit_test(test_cuboid_symmetry),
       cmocka_unit_test(test_default_weights),

@@ -153,6 +153,41 @@ static void test_friction_changes_push(void **state) {
   assert_true(lo > hi + 0.02);
 }
 
+/* The object's poses along the horizon: the last is the final pose, a sample where a
+ * segment ends is where a rollout of the segments up to it ends, and a straight push
+ * never moves the object back. */
+static void test_samples_along_horizon(void **state) {
+  (void)state;
+  nds_model nm;
+  nds_test_build(&nm, 0.001, NULL);
+  mjData *d = mj_makeData(nm.m);
+  nds_ctrl_cfg ctrl;
+  nds_ctrl_cfg_default(&ctrl);
+  nds_state s0;
+  const double ee[2] = {-0.1, 0};
+  nds_state_rest(&nm, 0, 0, 0, ee, &s0);
+  double sp0[2][4];
+  sp_at(ee[0], ee[1], sp0);
+  const double keys[8] = {-0.02, 0, 0.6, 0, 0.05, 0, 0, 0};
+  nds_rollout_out full, first;
+  nds_rollout(&nm, d, &ctrl, &s0, (const double(*)[4])sp0, keys, 2, 0.3, &full);
+  nds_rollout(&nm, d, &ctrl, &s0, (const double(*)[4])sp0, keys, 1, 0.3, &first);
+  assert_int_equal(full.diverged, 0);
+  assert_int_equal(first.diverged, 0);
+  const int last = NDS_ROLLOUT_NS - 1, half = NDS_ROLLOUT_NS / 2 - 1;
+  assert_true(full.obj_at[last][0] == full.obj_xy[0] && full.obj_at[last][1] == full.obj_xy[1]);
+  assert_true(full.obj_at[last][2] == full.obj_yaw);
+  /* 600 steps, 8 samples: the fourth falls at step 300, where the first segment ends. */
+  assert_true(full.obj_at[half][0] == first.obj_xy[0] && full.obj_at[half][1] == first.obj_xy[1]);
+  assert_true(full.obj_at[half][2] == first.obj_yaw);
+  for (int k = 1; k < NDS_ROLLOUT_NS; k++) assert_true(full.obj_at[k][0] >= full.obj_at[k - 1][0]);
+  printf("sampled_object_x %.4f %.4f %.4f m (first, mid, last)\n", full.obj_at[0][0],
+         full.obj_at[half][0], full.obj_at[last][0]);
+  assert_true(full.obj_at[last][0] > full.obj_at[0][0] + 0.02);
+  mj_deleteData(d);
+  nds_model_free(&nm);
+}
+
 /* Rollouts from the same state and plan are bitwise identical on every worker, in a
  * batch, and whatever ran on the mjData before. */
 static void test_deterministic(void **state) {
@@ -354,6 +389,11 @@ static void test_free_flight_agrees(void **state) {
       assert_int_equal(full.skipped, 0);
       worst_obj = fmax(worst_obj, hypot(ff.obj_xy[0] - full.obj_xy[0], ff.obj_xy[1] - full.obj_xy[1]));
       worst_obj = fmax(worst_obj, 0.05 * fabs(nd_wrap_angle(ff.obj_yaw - full.obj_yaw)));
+      for (int s = 0; s < NDS_ROLLOUT_NS; s++) {
+        const double *a = ff.obj_at[s], *b = full.obj_at[s];
+        worst_obj = fmax(worst_obj, fmax(hypot(a[0] - b[0], a[1] - b[1]),
+                                         0.05 * fabs(nd_wrap_angle(a[2] - b[2]))));
+      }
       worst_ee = fmax(worst_ee, hypot(ff.ee_xy[0] - full.ee_xy[0], ff.ee_xy[1] - full.ee_xy[1]));
       skipped += ff.skipped, steps += ff.steps;
       if (i % 3 == 0) far_skipped += ff.skipped, far_steps += ff.steps;
@@ -479,6 +519,7 @@ int main(void) {
       cmocka_unit_test(test_tracks_keypoints),
       cmocka_unit_test(test_light_sphere_coarse_step),
       cmocka_unit_test(test_friction_changes_push),
+      cmocka_unit_test(test_samples_along_horizon),
       cmocka_unit_test(test_deterministic),
       cmocka_unit_test(test_divergence),
       cmocka_unit_test(test_free_flight_agrees),
