@@ -58,8 +58,12 @@ static void sample(const bridge_cmd *c, double h, double sp[2][4]) {
 static int setpoint(bridge_loop *b, double now, int64_t utime, double sp[2][4]) {
   bridge_cmd c;
   if (nd_mailbox_take(&b->cmd, &b->cmd_version, &c, sizeof(c)) == (int)sizeof(c)) {
-    b->prev = b->last;
-    b->have_prev = b->have_cmd;
+    /* A step catching up after a stall may get several commands stamped ahead of it: the
+     * one it follows is the newest its time has reached, not merely the one before. */
+    if (b->have_cmd && (b->last.utime <= utime || !b->have_prev)) {
+      b->prev = b->last;
+      b->have_prev = 1;
+    }
     b->last = c;
     b->have_cmd = 1;
     b->silent = 0;

@@ -86,7 +86,8 @@ typedef struct {
   nd_ring out;         /* loop -> I/O: encoded ROBOT_STATE / MOCAP / ARM_STATE */
   atomic_uint_fast64_t resume_req;  /* I/O -> loop: +1 per new task (a stopped arm resumes) */
   /* the loop thread's own */
-  bridge_cmd last, prev; /* the newest command and the one before it */
+  bridge_cmd last, prev; /* the newest command, and the newest one whose time a step has
+                          * reached (the one before it, unless it is ahead of the steps) */
   int have_prev;
   int silent;          /* the newest command's silence is reported */
   bridge_sample sample[2]; /* this step's, and the step's before */

@@ -230,15 +230,23 @@ static void test_lab_commander_silent(void **state) {
  * the bridge's setpoint got from it at any deadline served (check_tick). */
 static nd_exec g_ref;
 static double g_off_max;
+/* While the bridge catches up: the executor's next command every g_feed_every ticks
+ * (0: none), the last one it sent g_fed. */
+static int g_feed_every, g_feed_ticks, g_fed;
 
 static void check_tick(void *ctx, const nd_rtloop_tick *t) {
+  if (g_feed_every && ++g_feed_ticks % g_feed_every == 0) {
+    const bridge_cmd c = live_send(++g_fed);
+    nd_mailbox_post(&g_b.cmd, &c, sizeof c);
+  }
   bridge_loop_tick(ctx, t);
   g_off_max = fmax(g_off_max, setpoint_off(&g_ref, 1e-3 * (double)llround((t->deadline - T0) * 1e3)));
 }
 
-/* The whole machine stalls, the bridge's loop and the executor alike, for 45 ms and 60 ms;
- * afterwards the executor sends its command for the present first, or the bridge wakes
- * first. Run through nd_rtloop with the bridge's catch-up, every missed deadline gets its
+/* The whole machine stalls, the bridge's loop and the executor alike, for 45 ms, 60 ms
+ * and 42 ms; afterwards the executor sends its command for the present first, or the
+ * bridge wakes first, or (the third) the executor sends first and goes on sending while
+ * the bridge catches up, each command stamped ahead of the steps. Run through nd_rtloop with the bridge's catch-up, every missed deadline gets its
  * world step, each sampling the command it is after (the one before the newest, when the
  * executor woke first), so the setpoint keeps to the executor's trajectory to 1 um at every
  * deadline, none is skipped, and no reflex stops the arm (a skipped one would move the
@@ -256,20 +264,29 @@ static void test_lab_machine_stall(void **state) {
   nd_jitter_reset(&g_l.jit);
   g_ref = g_ex;
   g_off_max = 0;
-  enum { STEPS = 1200, S1 = 400, S1_END = 445, S2 = 800, S2_END = 860 };
+  /* S3's commands during the catch-up start no new plan (none at a multiple of 30), so
+   * g_ref, the trajectory before the wake, still holds for them. */
+  enum { STEPS = 1200, S1 = 400, S1_END = 445, S2 = 800, S2_END = 860, S3 = 1000,
+         S3_END = 1042, FEED_EVERY = 10 };
   int64_t next = (int64_t)(T0 * 1e9);
   drained d = {0};
+  g_feed_every = g_feed_ticks = 0;
   for (int k = 0; k < STEPS; k++) {
-    if ((k >= S1 && k < S1_END) || (k >= S2 && k < S2_END)) continue;  /* all asleep */
+    if ((k >= S1 && k < S1_END) || (k >= S2 && k < S2_END) || (k >= S3 && k < S3_END))
+      continue;  /* all asleep */
+    if (k > S3_END && k <= g_fed) continue;  /* sent during the catch-up */
     const int bridge_first = k == S2_END;
     const int64_t now_ns = (int64_t)(T0 * 1e9) + (int64_t)k * 1000000 + 20000;
     const int64_t utime_now = U0 + (now_ns - (int64_t)(T0 * 1e9)) / 1000;
     if (bridge_first) nd_rtloop_wake(&g_l, &next, now_ns, utime_now), drain(&d);
     const bridge_cmd c = live_send(k);
     nd_mailbox_post(&g_b.cmd, &c, sizeof c);
+    if (k == S3_END) g_fed = k, g_feed_every = FEED_EVERY, g_feed_ticks = 0;
     if (!bridge_first) nd_rtloop_wake(&g_l, &next, now_ns, utime_now), drain(&d);
+    g_feed_every = 0;
     g_ref = g_ex;
   }
+  assert_true(g_fed > S3_END + 2);  /* several commands came during the third catch-up */
   printf("machine_stall_setpoint_off_max %.2e m\nmachine_stall_skipped %lld count\n"
          "machine_stall_stops %lld count\n", g_off_max, (long long)g_l.st.skipped,
          (long long)g_b.rep.stops);
