@@ -39,8 +39,8 @@ void nd_cost_lead_point(double lead, const nd_goal *goal, const double obj_xy[2]
 double nd_cost_edge(const nd_cost_weights *w, const nd_goal *goal, const double obj_xy[2],
                     const double lo[2], const double hi[2]);
 
-/* E of a rollout without L_edge: task, its task term (nd_task_error of the final state, the
- * paper's, or nd_cost_arrival), plus L_prox of the final state (from the lead point) and
+/* E of a rollout without L_edge: the task term `task` (the paper's nd_task_error of the
+ * final state, or nd_cost_arrival), L_prox of the final state (from the lead point), and
  * L_acc = acc_sq_mean, the mean of |a_ee|^2 over its steps. */
 double nd_cost_plan(const nd_cost_weights *w, const nd_goal *goal, double task,
                     const double obj_xy[2], const double ee_xy[2], double acc_sq_mean);
