@@ -68,9 +68,8 @@ double nd_cost_plan(const nd_cost_weights *w, const nd_goal *goal, double task,
  * the horizon's end, and the receding horizon then puts arrival off at every re-plan
  * (doc/decisions.md#arrival). Counting only a stay below eps keeps a push that runs the
  * object through the goal from scoring as arriving. */
-double nd_cost_arrival(const nd_cost_weights *w, const nd_goal *goal, const double (*at)[3],
-                       int n) {
-  const double eps = goal->eps;
+double nd_cost_arrival(const nd_cost_weights *w, const nd_goal *goal, double eps,
+                       const double (*at)[3], int n) {
   if (!(eps > 0.0)) return nd_task_error(w, goal, at[n - 1], at[n - 1][2]);
   double stay = 0.0, best = INFINITY;
   for (int k = n - 1; k >= 0; k--) {

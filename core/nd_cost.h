@@ -45,13 +45,13 @@ double nd_cost_edge(const nd_cost_weights *w, const nd_goal *goal, const double 
 double nd_cost_plan(const nd_cost_weights *w, const nd_goal *goal, double task,
                     const double obj_xy[2], const double ee_xy[2], double acc_sq_mean);
 
-/* The task term by arrival, from the object's poses at[k] = (x, y, yaw) at (k + 1) / n of
- * the horizon (at[n - 1] the final): with S_k the largest task error from sample k on, the
- * least of S_k + goal->eps (k + 1) / n where S_k < eps, else the final error + eps. A plan
- * that meets eps and keeps it scores by when (under 2 eps, every other one above); the
- * final error alone when eps <= 0. */
-double nd_cost_arrival(const nd_cost_weights *w, const nd_goal *goal, const double (*at)[3],
-                       int n);
+/* The task term by arrival at eps (a threshold to aim at, e.g. a share of the goal's),
+ * from the object's poses at[k] = (x, y, yaw) at (k + 1) / n of the horizon (at[n - 1] the
+ * final): with S_k the largest task error from sample k on, the least of S_k + eps (k + 1)
+ * / n where S_k < eps, else the final error + eps. A plan that meets eps and keeps it
+ * scores by when (under 2 eps, every other one above); the final error alone if eps <= 0. */
+double nd_cost_arrival(const nd_cost_weights *w, const nd_goal *goal, double eps,
+                       const double (*at)[3], int n);
 
 /* Task error L_pos + w_rot L_rot, the quantity the terminal condition compares to eps. */
 double nd_task_error(const nd_cost_weights *w, const nd_goal *goal, const double obj_xy[2],

@@ -220,8 +220,10 @@ static int plan_cost(void *ctx, const double *x, int n, double *cost) {
   for (int k = 0; k < m; k++) {
     const nds_rollout_out *o = &p->outs[k];
     const int i = p->feas_idx[k];
-    const double task = c->arrival ? nd_cost_arrival(&c->w, p->goal, o->obj_at, NDS_ROLLOUT_NS)
-                                   : nd_task_error(&c->w, p->goal, o->obj_xy, o->obj_yaw);
+    const double task =
+        c->arrival > 0.0
+            ? nd_cost_arrival(&c->w, p->goal, c->arrival * p->goal->eps, o->obj_at, NDS_ROLLOUT_NS)
+            : nd_task_error(&c->w, p->goal, o->obj_xy, o->obj_yaw);
     cost[i] = o->diverged ? INFINITY
                           : nd_cost_plan(&c->w, p->goal, task, o->obj_xy, o->ee_xy, o->acc_sq_mean) +
                                 c->w.w_edge * nd_cost_edge(&c->w, p->goal, o->obj_xy, c->ws_lo, c->ws_hi);

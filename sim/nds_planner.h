@@ -27,8 +27,9 @@ typedef struct {
   double v_max, a_max;      /* end-effector limits the segments must respect */
   double limit_penalty;     /* added cost per unit of relative excess over a limit */
   nd_cost_weights w;
-  int arrival;              /* 1: the task term by arrival at the goal's eps (nd_cost_arrival);
-                             * 0, the default: the final state's error, the paper's */
+  double arrival;           /* > 0: the task term by arrival (nd_cost_arrival) at this share
+                             * of the goal's eps; 0, the default: the final state's error,
+                             * the paper's */
   nds_ctrl_cfg ctrl;
   int free_flight;          /* rollouts skip MuJoCo while the sphere is far from the object
                              * (nds_rollout_ff); 1 by default */

@@ -414,7 +414,7 @@ pt_check "nudge-up demo --world lab with stand-ins exits 0 (got $rc)" test "$rc"
 LAB=-0.15,-0.30,0.15,0.40
 args_are nudge-bridge --workspace "$LAB" --world lab
 args_are nudge-executor --workspace "$LAB" --v-max 0.5 --a-max 2.0
-args_are nudge-planner --workspace "$LAB" --v-max 0.45 --a-max 1.8 --segment-time 0.6 --arm panda --pop 16
+args_are nudge-planner --workspace "$LAB" --v-max 0.45 --a-max 1.8 --segment-time 0.6 --arrival 0.6 --arm panda --pop 16
 args_are nudge-tasks --record "$W/lab.nrb" --world lab --eps 1e-3 --record-control velocity
 args_are nudge-adapter --replay-mode velocity --fit slide,torsion,mass --scan none --buffer "$W/lab.nrb"
 rm -f "$W"/*.args

@@ -60,7 +60,7 @@ static void test_lead_point(void **state) {
 /* The task term by arrival: a plan that meets eps and stays scores by when it gets there
  * (eps (k + 1) / n on top of its largest error from then on), below every plan that does
  * not (its final error + eps); one that runs the object through the goal is not arriving;
- * eps 0 is the final error alone. */
+ * a smaller eps moves arrival later; eps 0 is the final error alone. */
 static void test_arrival(void **state) {
   (void)state;
   const nd_cost_weights w = {.w_rot = 0.02};
@@ -72,27 +72,30 @@ static void test_arrival(void **state) {
   const double through[N][3] = {{0.05, 0, 0}, {0.1, 0, 0}, {0.15, 0, 0}, {0.2, 0, 0}};
   const double short_of[N][3] = {{0.0, 0, 0}, {0.03, 0, 0}, {0.05, 0, 0}, {0.06, 0, 0}};
   /* early: within eps (1e-4) from the first sample on. */
-  assert_near(nd_cost_arrival(&w, &g, early, N), 1e-4 + 1e-3 * 0.25, 1e-15);
+  assert_near(nd_cost_arrival(&w, &g, g.eps, early, N), 1e-4 + 1e-3 * 0.25, 1e-15);
   /* late: 4e-4 at the third sample, 0 at the last: max 4e-4 from k = 2 (0.75 of the
    * horizon), 0 at k = 3. */
-  assert_near(nd_cost_arrival(&w, &g, late, N), fmin(4e-4 + 1e-3 * 0.75, 1e-3), 1e-15);
-  assert_true(nd_cost_arrival(&w, &g, early, N) < nd_cost_arrival(&w, &g, late, N));
+  assert_near(nd_cost_arrival(&w, &g, g.eps, late, N), fmin(4e-4 + 1e-3 * 0.75, 1e-3), 1e-15);
+  assert_true(nd_cost_arrival(&w, &g, g.eps, early, N) < nd_cost_arrival(&w, &g, g.eps, late, N));
   /* through: at the goal mid-horizon, 0.1 beyond at the end: not arriving. */
-  assert_near(nd_cost_arrival(&w, &g, through, N), 0.01 + 1e-3, 1e-15);
+  assert_near(nd_cost_arrival(&w, &g, g.eps, through, N), 0.01 + 1e-3, 1e-15);
   /* short of it: the final error + eps, above every arriving plan's 2 eps. */
-  assert_near(nd_cost_arrival(&w, &g, short_of, N), 0.0016 + 1e-3, 1e-15);
-  assert_true(nd_cost_arrival(&w, &g, late, N) < 2e-3);
+  assert_near(nd_cost_arrival(&w, &g, g.eps, short_of, N), 0.0016 + 1e-3, 1e-15);
+  assert_true(nd_cost_arrival(&w, &g, g.eps, late, N) < 2e-3);
   /* A yaw error counts as nd_task_error does: 90 degrees off at the end is not arriving. */
   const double turned[N][3] = {{0.1, 0, 0}, {0.1, 0, 0}, {0.1, 0, 0}, {0.1, 0, 1.5707963267948966}};
-  assert_near(nd_cost_arrival(&w, &g, turned, N), 0.02 + 1e-3, 1e-15);
+  assert_near(nd_cost_arrival(&w, &g, g.eps, turned, N), 0.02 + 1e-3, 1e-15);
+  /* Aimed inside the goal's eps (the planner's --arrival share): early's 1e-4 at the first
+   * sample no longer counts at 5e-5, its arrival is the second sample. */
+  assert_near(nd_cost_arrival(&w, &g, 5e-5, early, N), 5e-5 * 0.5, 1e-18);
   /* Without eps, the final state's error: the paper's term. */
   g.eps = 0.0;
-  assert_near(nd_cost_arrival(&w, &g, late, N), 0.0, 0.0);
-  assert_near(nd_cost_arrival(&w, &g, through, N), 0.01, 1e-15);
+  assert_near(nd_cost_arrival(&w, &g, g.eps, late, N), 0.0, 0.0);
+  assert_near(nd_cost_arrival(&w, &g, g.eps, through, N), 0.01, 1e-15);
   /* A NaN sample is never a good plan. */
   g.eps = 1e-3;
   const double bad[N][3] = {{0.1, 0, 0}, {NAN, 0, 0}, {0.1, 0, 0}, {0.1, 0, 0}};
-  assert_true(isinf(nd_cost_arrival(&w, &g, bad, N)));
+  assert_true(isinf(nd_cost_arrival(&w, &g, g.eps, bad, N)));
 }
 
 /* L_edge on the lab's box [-0.15, 0.15] x [-0.30, 0.40] with the 8 cm lead: the object
