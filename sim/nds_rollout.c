@@ -65,16 +65,12 @@ static void ee_offset(const nds_model *nm, double off[2]) {
     off[k] = nm->m->body_pos[3 * nm->ee_body + k] - nm->m->qpos0[nm->ee_qpos[k]];
 }
 
-/* After step n of nsteps: the object's pose into out->obj_at where a sample falls. */
-static void sample_obj(const nds_model *nm, const mjData *d, long n, long nsteps,
-                       nds_rollout_out *out) {
-  for (int k = 0; k < NDS_ROLLOUT_NS; k++) {
-    if ((k + 1) * nsteps / NDS_ROLLOUT_NS != n + 1) continue;
-    const mjtNum *q = d->qpos + nm->obj_qpos;
-    out->obj_at[k][0] = q[0];
-    out->obj_at[k][1] = q[1];
-    out->obj_at[k][2] = nd_quat_yaw(q + 3);
-  }
+/* The object's pose (x, y, yaw) in d into at[3]. */
+static void obj_pose(const nds_model *nm, const mjData *d, double at[3]) {
+  const mjtNum *q = d->qpos + nm->obj_qpos;
+  at[0] = q[0];
+  at[1] = q[1];
+  at[2] = nd_quat_yaw(q + 3);
 }
 
 static int warned(const mjData *d) {
@@ -125,6 +121,9 @@ void nds_rollout_ff(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
                  m->dof_damping[nm->ee_dof[1]] == 0;
   long skipped = 0;
   int diverged = 0;
+  /* The next horizon sample, and the step count it falls after ((k + 1) / NS of nsteps). */
+  int next = 0;
+  long next_at = nsteps / NDS_ROLLOUT_NS;
   for (long n = 0; n < nsteps && !diverged; n++) {
     /* Zero-order hold: the setpoint at the step's start drives the whole step, as the
      * executor's 1 kHz setpoint does on the robot. Time from the step index, not from
@@ -151,14 +150,17 @@ void nds_rollout_ff(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
       }
       d->time += dt;
       skipped++;
-      sample_obj(nm, d, n, nsteps, out);
-      continue;
+    } else {
+      d->qfrc_applied[nm->ee_dof[0]] = f[0];
+      d->qfrc_applied[nm->ee_dof[1]] = f[1];
+      mj_step(m, d);
+      diverged = warned(d);
     }
-    d->qfrc_applied[nm->ee_dof[0]] = f[0];
-    d->qfrc_applied[nm->ee_dof[1]] = f[1];
-    mj_step(m, d);
-    diverged = warned(d);
-    sample_obj(nm, d, n, nsteps, out);
+    /* A sample due before the first step (under NS steps) takes the pose after it. */
+    while (next < NDS_ROLLOUT_NS && n + 1 >= next_at) {
+      obj_pose(nm, d, out->obj_at[next++]);
+      next_at = (long)(next + 1) * nsteps / NDS_ROLLOUT_NS;
+    }
   }
   if (!diverged && !(nd_all_finite(d->qpos, m->nq) && nd_all_finite(d->qvel, m->nv)))
     diverged = 1;

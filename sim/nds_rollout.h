@@ -12,7 +12,8 @@
 #include "nds_model.h"
 #include "nds_state.h"
 
-/* Object poses a rollout samples along its horizon, at its (k + 1) / NDS_ROLLOUT_NS. */
+/* Object poses a rollout samples along its horizon, after the step that reaches its (k + 1)
+ * / NDS_ROLLOUT_NS (the first step, for a horizon of fewer steps). */
 #define NDS_ROLLOUT_NS 8
 
 typedef struct {

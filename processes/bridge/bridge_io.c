@@ -28,7 +28,7 @@ static void use_ee_cmd(void *user, const nudge_ee_cmd_t *msg) {
    * being tracked until it is stale, and then the robot holds. The future's ends are
    * checked too: the robot follows them while the commander is silent. */
   const double *at[3] = {msg->p, msg->seg_key, msg->hold};
-  static const char *name[3] = {"p", "seg_key", "hold"};
+  static const char *const name[3] = {"p", "seg_key", "hold"};
   for (int i = 0; i < 3; i++)
     for (int k = 0; k < 2; k++) {
       if (at[i][k] >= io->ws.lo[k] - BRIDGE_WS_MARGIN && at[i][k] <= io->ws.hi[k] + BRIDGE_WS_MARGIN)
@@ -136,7 +136,7 @@ void bridge_io_report(bridge_io *io, uint64_t *version, const nd_rtloop_stats *l
   if (r->stops > io->stops_said) {
     const nds_panda_reflex *x = &r->reflex;
     const bridge_sample *sa = r->stop_sample;
-    static const char *how[4] = {"held", "Taylor", "future", "future of the one before"};
+    static const char *const how[4] = {"held", "Taylor", "future", "future of the one before"};
     fprintf(stderr, PROG ": the robot stopped: %s %.4g beyond its limit %.4g; braking until the "
             "next task (%lld stops); setpoint sampled from EE_CMD %lld (%s) %.2f ms after its "
             "time, the newest arrived %.2f ms before; the step before: EE_CMD %lld (%s) %.2f "

@@ -36,7 +36,8 @@ typedef struct {
  * at 0.5 m/s and 0.2 ms: 100 m/s^2 to the robot's acceleration reflex); the Taylor terms
  * drift from a live segment by snap h^4/24 (0.1 mm after 13 ms), which is why a stalled
  * commander or machine is bridged by the future, not the terms. A step before the newest
- * command's time (a catch-up after the bridge stalled) samples the command before it. */
+ * command's time (a catch-up after the bridge stalled) samples the newest command whose
+ * time the steps have reached. */
 #define BRIDGE_CMD_TAYLOR 0.002
 
 /* The commands' stamps and the robot's clock may disagree by this much (s): h beyond the
@@ -50,7 +51,7 @@ typedef enum {
   BRIDGE_SAMPLE_HOLD = 0,    /* holding */
   BRIDGE_SAMPLE_TAYLOR = 1,  /* the newest command's Taylor terms */
   BRIDGE_SAMPLE_FUTURE = 2,  /* the newest command's future */
-  BRIDGE_SAMPLE_PREV = 3     /* the command before it (a step before its time) */
+  BRIDGE_SAMPLE_PREV = 3     /* the newest reached (a step before the newest's time) */
 } bridge_sample_how;
 
 typedef struct {

@@ -13,7 +13,7 @@
 int main(int argc, char **argv) {
   planner_opts o = {.threads = ndp_default_threads(), .pop = 20, .iters = 2, .seed = 1,
                     .max_rate = 40.0, .state_timeout = 0.1, .lead = 1, .release = 0.01};
-  static const char *const onoff_words[] = {"off", "on", NULL};
+  static const char *const lead_words[] = {"off", "on", NULL};
   static const char *const arm_words[] = {"none", "panda", NULL};
   int arm = 0;
   /* 10 ms, not the demo's 5 ms: on one core it plans at ~19 Hz while pushing, above the
@@ -50,7 +50,7 @@ int main(int argc, char **argv) {
        .help = "score a plan that meets F times the task's eps within the horizon, and stays "
                "within it, by when it gets there (F below 1 leaves room for the model's "
                "error); 0 scores the horizon's end alone (the paper's cost)"},
-      {"lead", ND_OPT_CHOICE, &o.lead, .choices = onoff_words, .arg = "on|off", .def = "on",
+      {"lead", ND_OPT_CHOICE, &o.lead, .choices = lead_words, .arg = "on|off", .def = "on",
        .help = "latency compensation: plan from the state predicted for when the plan will "
                "reach the executor (the executor's committed trajectory from EE_CMD), and "
                "have it start then; off plans from the newest measurement, started on arrival"},
@@ -151,7 +151,7 @@ int main(int argc, char **argv) {
           "x [%g, %g] y [%g, %g] m, v_max %g m/s, a_max %g m/s^2\n",
           ndp_url(o.url), o.pop, o.iters, pc.M, pc.T, o.plan_dt,
           calibrated ? "calibrated" : "the world's", o.threads, o.max_rate,
-          onoff_words[o.lead], pc.arrival, arm_words[arm], pc.reach_max, pc.redraws, o.state_timeout, o.theta[0], o.theta[1], o.theta[2], o.theta[3],
+          lead_words[o.lead], pc.arrival, arm_words[arm], pc.reach_max, pc.redraws, o.state_timeout, o.theta[0], o.theta[1], o.theta[2], o.theta[3],
           (unsigned long long)o.seed, pc.ws_lo[0], pc.ws_hi[0], pc.ws_lo[1], pc.ws_hi[1],
           pc.v_max, pc.a_max);
 

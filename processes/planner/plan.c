@@ -152,11 +152,25 @@ int planner_plan_once(planner_proc *p, double now, char *err, int errlen) {
   return 0;
 }
 
+/* 1 if MOCAP and ROBOT_STATE are fresh enough to place a release by. */
+static int release_sensed(const planner_proc *p, double now) {
+  return ndp_input_fresh(&p->in_mocap, now, p->o->state_timeout) &&
+         ndp_input_fresh(&p->in_rs, now, p->o->state_timeout);
+}
+
 /* The object as nd_release sees it: its newest MOCAP pose and the model's sides. */
 static nd_release_box release_box(const planner_proc *p) {
   return (nd_release_box){.x = p->mocap.obj_pos[0], .y = p->mocap.obj_pos[1],
                           .yaw = nd_quat_yaw(p->mocap.obj_quat),
                           .half = {p->obj_half[0], p->obj_half[1]}};
+}
+
+/* The rest point key[2] --release clear of b from the sphere's measured position, in the
+ * keypoint box; return how far it moves the sphere (m). */
+static double release_key(const planner_proc *p, const nd_release_box *b, double key[2]) {
+  const nds_planner_cfg *pc = nds_planner_config(p->planner);
+  return nd_release_target(b, p->ee_radius, p->o->release, p->rs.ee_pos, pc->ws_lo, pc->ws_hi,
+                           key);
 }
 
 /* Publish the PLAN that rests the sphere at key[2] (the object b predicted to stay). */
@@ -182,15 +196,11 @@ static int publish_release(planner_proc *p, double now, const nd_release_box *b,
 
 int planner_release(planner_proc *p, double now, char *err, int errlen) {
   const planner_opts *o = p->o;
-  if (!ndp_input_fresh(&p->in_mocap, now, o->state_timeout) ||
-      !ndp_input_fresh(&p->in_rs, now, o->state_timeout))
-    return 0;
+  if (!release_sensed(p, now)) return 0;
   p->release_due = 0;
-  const nds_planner_cfg *pc = nds_planner_config(p->planner);
   const nd_release_box b = release_box(p);
   double key[2];
-  const double moved = nd_release_target(&b, p->ee_radius, o->release, p->rs.ee_pos, pc->ws_lo,
-                                         pc->ws_hi, key);
+  const double moved = release_key(p, &b, key);
   if (publish_release(p, now, &b, key, err, errlen)) return -1;
   p->keep_clear = o->release > 0.0;
   fprintf(stderr, PROG ": task %lld: released: the sphere rests at (%+.3f, %+.3f) m, %.1f mm "
@@ -201,18 +211,14 @@ int planner_release(planner_proc *p, double now, char *err, int errlen) {
 
 int planner_keep_clear(planner_proc *p, double now, char *err, int errlen) {
   const planner_opts *o = p->o;
-  if (!p->keep_clear || now - p->released_at < PLANNER_RECLEAR_WAIT ||
-      !ndp_input_fresh(&p->in_mocap, now, o->state_timeout) ||
-      !ndp_input_fresh(&p->in_rs, now, o->state_timeout))
+  if (!p->keep_clear || now - p->released_at < PLANNER_RECLEAR_WAIT || !release_sensed(p, now))
     return 0;
   const nd_release_box b = release_box(p);
   double n[2];
   const double gap = nd_release_gap(&b, p->ee_radius, p->rs.ee_pos, n);
   if (gap >= PLANNER_RECLEAR * o->release) return 0;
-  const nds_planner_cfg *pc = nds_planner_config(p->planner);
   double key[2];
-  const double moved = nd_release_target(&b, p->ee_radius, o->release, p->rs.ee_pos, pc->ws_lo,
-                                         pc->ws_hi, key);
+  const double moved = release_key(p, &b, key);
   if (moved < PLANNER_RECLEAR_MIN) {
     p->keep_clear = 0;
     fprintf(stderr, PROG ": task %lld: the object is %.1f mm from the sphere, which the keypoint "

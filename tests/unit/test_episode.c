@@ -25,16 +25,17 @@ static int teardown(void **state) {
   return 0;
 }
 
-static void run(fixture *f, const nd_goal *g, nds_episode_out *o) {
+/* One episode toward g with planner pl (the fixture's, or one built on its model). */
+static void run(fixture *f, nds_planner *pl, const nd_goal *g, nds_episode_out *o) {
   char err[256];
   nds_episode_cfg ec;
   nds_episode_cfg_default(&ec);
   const double ee0[2] = {-0.10, 0.0};
   nds_state start;
   nds_state_rest(&f->world, 0.0, 0.0, 0.0, ee0, &start);
-  nds_planner_reset(f->planner);
-  const nds_planner_cfg *pc = nds_planner_config(f->planner);
-  int rc = nds_episode_run(&f->world, f->d, f->planner, &pc->ctrl, &ec, &start, g, NULL, NULL,
+  nds_planner_reset(pl);
+  const nds_planner_cfg *pc = nds_planner_config(pl);
+  int rc = nds_episode_run(&f->world, f->d, pl, &pc->ctrl, &ec, &start, g, NULL, NULL,
                            o, err, sizeof(err));
   if (rc) fail_msg("episode failed: %s", err);
   printf("goal (%.2f, %.2f, %.2f): reached %d at %.2f s, pos err %.4f m, yaw err %.3f rad, "
@@ -49,7 +50,7 @@ static void test_reaches_goals(void **state) {
   const nd_goal goals[3] = {{.x = 0.20, .y = 0.00, .yaw = 0.0}, {.x = 0.15, .y = 0.12, .yaw = 0.6}, {.x = 0.15, .y = -0.12, .yaw = -0.6}};
   for (int i = 0; i < 3; i++) {
     nds_episode_out o;
-    run(f, &goals[i], &o);
+    run(f, f->planner, &goals[i], &o);
     assert_int_equal(o.reached, 1);
     assert_true(o.t_reached > 0.0 && o.t_reached <= 5.0);
     assert_true(o.pos_err < 0.1);
@@ -75,15 +76,12 @@ static void test_arrival(void **state) {
     cfg.arrival = v ? 1.0 : 0.0;  /* the goal's eps itself: in process the model errs little */
     nds_planner *p = nds_planner_create(&f->plan, &cfg, f->pool, err, sizeof(err));
     assert_non_null(p);
-    nds_planner *keep = f->planner;
-    f->planner = p;
     for (int i = 0; i < 3; i++) {
       nds_episode_out o;
-      run(f, &goals[i], &o);
+      run(f, p, &goals[i], &o);
       assert_int_equal(o.reached_fine, 1);
       t_sum[v] += o.t_fine;
     }
-    f->planner = keep;
     nds_planner_free(p);
   }
   printf("arrival_reach_time_sum %.3f s (final state only: %.3f s)\n", t_sum[1], t_sum[0]);
@@ -97,14 +95,12 @@ static void test_deterministic(void **state) {
   nds_episode_out o[2];
   char err[256];
   nds_planner_cfg cfg = *nds_planner_config(f->planner);
-  nds_planner *keep = f->planner;
   for (int i = 0; i < 2; i++) {
-    f->planner = nds_planner_create(&f->plan, &cfg, f->pool, err, sizeof(err));
-    assert_non_null(f->planner);
-    run(f, &g, &o[i]);
-    nds_planner_free(f->planner);
+    nds_planner *p = nds_planner_create(&f->plan, &cfg, f->pool, err, sizeof(err));
+    assert_non_null(p);
+    run(f, p, &g, &o[i]);
+    nds_planner_free(p);
   }
-  f->planner = keep;
   assert_true(o[0].t_end == o[1].t_end);
   assert_true(o[0].pos_err == o[1].pos_err);
   assert_true(o[0].yaw_err == o[1].yaw_err);

@@ -116,6 +116,14 @@ static void test_light_sphere_coarse_step(void **state) {
   nds_model_free(&nm);
 }
 
+/* The sphere at rest 10 cm behind the box (at the origin) on the x axis, its setpoint
+ * there too. */
+static void behind_start(const nds_model *nm, nds_state *s, double sp[2][4]) {
+  const double ee[2] = {-0.1, 0};
+  nds_state_rest(nm, 0, 0, 0, ee, s);
+  sp_at(ee[0], ee[1], sp);
+}
+
 /* Theta reaches the contact: the sphere strikes the box and stops, the box slides on;
  * it slides less far under more sliding friction. */
 static double push_distance(double slide) {
@@ -126,10 +134,8 @@ static double push_distance(double slide) {
   nds_ctrl_cfg ctrl;
   nds_ctrl_cfg_default(&ctrl);
   nds_state s0;
-  const double ee[2] = {-0.1, 0};
-  nds_state_rest(&nm, 0, 0, 0, ee, &s0);
   double sp0[2][4];
-  sp_at(ee[0], ee[1], sp0);
+  behind_start(&nm, &s0, sp0);
   const double keys[12] = {-0.03, 0, 0.8, 0, 0.0, 0, 0, 0, 0.0, 0, 0, 0};
   nds_rollout_out o;
   nds_rollout(&nm, d, &ctrl, &s0, (const double(*)[4])sp0, keys, 3, 0.2, &o);
@@ -164,10 +170,8 @@ static void test_samples_along_horizon(void **state) {
   nds_ctrl_cfg ctrl;
   nds_ctrl_cfg_default(&ctrl);
   nds_state s0;
-  const double ee[2] = {-0.1, 0};
-  nds_state_rest(&nm, 0, 0, 0, ee, &s0);
   double sp0[2][4];
-  sp_at(ee[0], ee[1], sp0);
+  behind_start(&nm, &s0, sp0);
   const double keys[8] = {-0.02, 0, 0.6, 0, 0.05, 0, 0, 0};
   nds_rollout_out full, first;
   nds_rollout(&nm, d, &ctrl, &s0, (const double(*)[4])sp0, keys, 2, 0.3, &full);
