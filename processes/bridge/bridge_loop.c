@@ -51,6 +51,47 @@ static void sample(const bridge_cmd *c, double h, double sp[2][4]) {
   }
 }
 
+/* Add the join's offset at utime to sp, first starting one if this step samples another
+ * command than the step before did from a future, and the two disagree (BRIDGE_JOIN_S). */
+static void join(bridge_loop *b, int64_t utime, double sp[2][4]) {
+  bridge_sample *sa = &b->sample[0];
+  const bridge_sample *before = &b->sample[1];
+  double off[2][4];
+  sa->join = -1;
+  if (sa->how == BRIDGE_SAMPLE_HOLD) {
+    b->joining = 0;
+    return;
+  }
+  if (b->joining) {
+    const double t = 1e-6 * (double)(utime - b->join_utime);
+    if (t >= b->join.T) b->joining = 0;
+    else nd_snap_seg_eval(&b->join, t, off), sa->join = t;
+  }
+  const bridge_cmd *now = sa->how == BRIDGE_SAMPLE_PREV ? &b->prev : &b->last;
+  if (before->how != BRIDGE_SAMPLE_HOLD && before->h > BRIDGE_CMD_TAYLOR &&
+      (now->seq != b->src.seq || now->utime != b->src.utime)) {
+    /* Where the step before's trajectory (and offset) goes on to, less where this one is. */
+    double was[2][4];
+    sample(&b->src, 1e-6 * (double)(utime - b->src.utime), was);
+    for (int k = 0; k < 2; k++)
+      for (int i = 0; i < 4; i++) was[k][i] += (sa->join >= 0 ? off[k][i] : 0.0) - sp[k][i];
+    const double miss = hypot(was[0][ND_P], was[1][ND_P]);
+    b->joining = miss <= BRIDGE_JOIN_MAX;
+    if (b->joining) {
+      nd_snap_seg_make(&b->join, (const double(*)[4])was, (const double[2]){0, 0},
+                       (const double[2]){0, 0}, BRIDGE_JOIN_S);
+      b->join_utime = utime;
+      b->rep.joins++;
+      memcpy(off, was, sizeof off);
+      sa->join = 0;
+    }
+  }
+  b->src = *now;
+  if (!b->joining) return;
+  for (int k = 0; k < 2; k++)
+    for (int i = 0; i < 4; i++) sp[k][i] += off[k][i];
+}
+
 /* The setpoint at utime: the newest command's trajectory until it is stale, or the one
  * before it for a step before its time; hold the last setpoint while the stamps disagree
  * with the robot's clock, and where the sphere is once the commands are stale or before
@@ -112,6 +153,7 @@ static int setpoint(bridge_loop *b, double now, int64_t utime, double sp[2][4]) 
     sa->h = h, sa->cmd_seq = b->last.seq;
     sample(&b->last, h, sp);
   }
+  join(b, utime, sp);
   for (int k = 0; k < 2; k++) b->sp_last[k] = sp[k][ND_P];
   return changed;
 }

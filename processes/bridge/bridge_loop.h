@@ -1,7 +1,8 @@
 /* bridge_loop: one step of nudge-bridge's 1 kHz loop, without the clock.
  *
  * Take the newest EE_CMD from its mailbox and track the trajectory it commits to, sampled at
- * the step's time, until it is stale; then hold where the sphere is, as before the first;
+ * the step's time (joined, when it left the one a step followed), until it is stale; then
+ * hold where the sphere is, as before the first;
  * step the world (sim/nds_world.h);
  * encode ROBOT_STATE and the motion-capture frames the step released into the ring. A step
  * never allocates, locks, prints or waits on I/O (tests/unit/test_rtloop.c counts it);
@@ -46,6 +47,15 @@ typedef struct {
  * new motion for the reflexes. A commander silent this long is reported, and followed. */
 #define BRIDGE_CMD_HORIZON 0.02
 
+/* A command off the trajectory a step sampled from the command before's future (the
+ * executor switched plans while its commands were late) is joined, not stepped to: the
+ * setpoint is the newest trajectory plus an offset that starts at what separates the two
+ * (p, v, a, j) and decays to 0 in BRIDGE_JOIN_S along a min-snap segment. Stepped to, 6.5 um
+ * in one step is 6500 m/s^3 to the jerk reflex; joined, ~10 um adds tens of m/s^3.
+ * An offset over BRIDGE_JOIN_MAX is a jump the executor made; the robot gets it as it is. */
+#define BRIDGE_JOIN_S 0.03
+#define BRIDGE_JOIN_MAX 0.005
+
 /* How a step's setpoint was sampled, for telling what a reflex stop followed. */
 typedef enum {
   BRIDGE_SAMPLE_HOLD = 0,    /* holding */
@@ -59,12 +69,13 @@ typedef struct {
   double h;             /* s after the sampled command's time */
   double silence;       /* s since the newest command arrived */
   int64_t cmd_seq;      /* the sampled command's seq */
+  double join;          /* s into a join (BRIDGE_JOIN_S), or -1 */
 } bridge_sample;
 
 /* What the loop reports, every BRIDGE_LOOP_REPORT_STEPS steps and at every hold or stop
  * change. Counters only grow. */
 typedef struct {
-  int64_t steps, resets, hold_events, apart_events, silent_events, stops;
+  int64_t steps, resets, hold_events, apart_events, silent_events, stops, joins;
   int64_t robot_states, frames, arm_states;
   double hold_pos[2];  /* the setpoint while holding */
   int32_t holding, have_cmd, stopped;
@@ -90,6 +101,10 @@ typedef struct {
   bridge_cmd last, prev; /* the newest command, and the newest one whose time a step has
                           * reached (the one before it, unless it is ahead of the steps) */
   int have_prev;
+  bridge_cmd src;      /* the command the last step sampled */
+  nd_snap_seg join;    /* the offset being joined, from join_utime on (joining) */
+  int64_t join_utime;
+  int joining;
   int silent;          /* the newest command's silence is reported */
   bridge_sample sample[2]; /* this step's, and the step's before */
   uint64_t cmd_version;

@@ -6,7 +6,8 @@
  * capture time, and every deadline of a catch-up wake-up stepped. With the lab world's arm
  * and an executor's commands: jittered ones are applied at the step's time and stop no
  * reflex, a jump does; through a silent commander or a stall of the whole machine the
- * robot's setpoint stays on the executor's trajectory and no reflex stops it. */
+ * robot's setpoint stays on the executor's trajectory and no reflex stops it, and a command
+ * that arrives late after a plan switch is joined, not stepped to. */
 #define _GNU_SOURCE
 #include "nd_test.h"
 #include "rt_count.h"
@@ -226,6 +227,56 @@ static void test_lab_commander_silent(void **state) {
   nds_world_free(w);
 }
 
+/* The executor runs on, but its commands reach the bridge late: those of 25 ms (and of
+ * 30 ms, 40 ms) arrive together at its end, and the executor switched plans inside each delay.
+ * The robot followed the future of the last command it had, which the switch left: the
+ * newest command is up to ~10 um off it (6.5 um in one step is 6500 m/s^3 to the jerk
+ * reflex; stepped to, the first stops the arm at 7400). The bridge joins each within
+ * BRIDGE_JOIN_S: no reflex stops the arm, and the setpoint is back on the executor's
+ * trajectory to 1 um once each join ends, having strayed less than 0.1 mm. */
+static void test_lab_late_switch(void **state) {
+  (void)state;
+  nds_world *w = lab_bridge();
+  enum { STEPS = 1200, NLATE = 3 };
+  static const int from[NLATE] = {295, 590, 875}, to[NLATE] = {320, 620, 915};
+  double off_max = 0, off_after = 0, hist[4][2] = {{0}}, jerk_join = 0, jerk_else = 0;
+  int late_i = 0;
+  bridge_cmd c = {0};
+  drained d = {0};
+  for (int k = 0; k < STEPS; k++) {
+    const double t = 1e-3 * k;
+    c = live_send(k);
+    const int held = late_i < NLATE && k >= from[late_i] && k < to[late_i];
+    if (!held) nd_mailbox_post(&g_b.cmd, &c, sizeof c);
+    if (late_i < NLATE && k == to[late_i]) late_i++;
+    bridge_loop_step(&g_b, T0 + t, U0 + (int64_t)k * 1000);
+    drain(&d);
+    const double off = setpoint_off(&g_ex, t);
+    int joining = 0;
+    for (int i = 0; i < NLATE; i++)
+      joining |= k >= from[i] && k < to[i] + (int)ceil(BRIDGE_JOIN_S * 1e3);
+    /* The commanded jerk as the robot's reflex sees it: third backward differences. */
+    memmove(hist[1], hist[0], sizeof hist[0] * 3);
+    memcpy(hist[0], g_b.sp_last, sizeof hist[0]);
+    const double jerk = 1e9 * hypot(hist[0][0] - 3 * hist[1][0] + 3 * hist[2][0] - hist[3][0],
+                                    hist[0][1] - 3 * hist[1][1] + 3 * hist[2][1] - hist[3][1]);
+    if (joining) off_max = fmax(off_max, off), jerk_join = fmax(jerk_join, jerk);
+    else if (k > 3) off_after = fmax(off_after, off), jerk_else = fmax(jerk_else, jerk);
+  }
+  printf("late_switch_off_max %.2e m (after the joins %.2e m)\nlate_switch_joins %lld count\n"
+         "late_switch_jerk_max %.0f m/s^3 (elsewhere %.0f m/s^3)\nlate_switch_stops %lld count\n",
+         off_max, off_after, (long long)g_b.rep.joins, jerk_join, jerk_else,
+         (long long)g_b.rep.stops);
+  assert_int_equal(g_b.rep.joins, NLATE);
+  assert_true(off_max > 5e-6);  /* the switches left the followed futures */
+  assert_true(off_max < 1e-4);
+  assert_true(off_after < 1e-6);
+  assert_true(jerk_join < 1000);
+  assert_int_equal(g_b.rep.stops, 0);
+  assert_int_equal(d.mode, NUDGE_ROBOT_STATE_T_MODE_TRACKING);
+  nds_world_free(w);
+}
+
 /* The executor's trajectory as of its last step before the bridge's wake-up, and how far
  * the bridge's setpoint got from it at any deadline served (check_tick). */
 static nd_exec g_ref;
@@ -380,6 +431,7 @@ int main(void) {
       cmocka_unit_test(test_lab_jittered_commands),
       cmocka_unit_test(test_lab_commander_silent),
       cmocka_unit_test(test_lab_machine_stall),
+      cmocka_unit_test(test_lab_late_switch),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
