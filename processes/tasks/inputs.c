@@ -62,6 +62,15 @@ static void use_robot_state(void *user, const nudge_robot_state_t *m) {
     io->run.reflex = m->reflex;
     io->run.reflex_joint = m->reflex_joint;
   }
+  /* A stop between tasks (the release after one, the sphere kept clear) ends no task, but
+   * the robot made it all the same: count and say it. */
+  const int stopped = m->mode == NUDGE_ROBOT_STATE_T_MODE_STOPPED;
+  if (stopped && io->robot_stopped == 0 && io->run.id < 0) {
+    io->stops_between++;
+    fprintf(stderr, PROG ": the robot stopped on a reflex between tasks: %s\n",
+            tasks_reflex_name(m->reflex, m->reflex_joint));
+  }
+  io->robot_stopped = stopped;
   if (!io->buf) return;
   nd_rec_state *s = &io->buf->rs;
   s->seq = m->seq;
@@ -110,6 +119,7 @@ int tasks_subscribe(tasks_io *io, lcm_t *lcm, char *err, int errlen) {
    * default queue of 30 would drop 1 kHz messages (the newest, as seq gaps). ROBOT_STATE
    * always: it says when a reflex stopped the robot. */
   io->run.id = -1;
+  io->robot_stopped = -1;  /* unknown: a stop before the runner started is not counted */
   lcm_subscription_t *rs = lcm_subscribe(lcm, NDP_CH_ROBOT_STATE, on_robot_state_raw, io);
   lcm_subscription_t *plan = lcm_subscribe(lcm, NDP_CH_PLAN, on_plan_raw, io);
   if (!lcm_subscribe(lcm, NDP_CH_MOCAP, on_mocap_raw, io) || !rs || !plan ||

@@ -94,7 +94,8 @@ int main(int argc, char **argv) {
     printf("object_path_mean %.3f m\nsphere_path_mean %.3f m\n", obj_path / attempted,
            ee_path / attempted);
   }
-  printf("reflex_stops %d count\ntasks_met_at_start %d count\n", stops, met);
+  printf("reflex_stops %d count\nreflex_stops_between %d count\ntasks_met_at_start %d count\n",
+         stops, io.stops_between, met);
   if (task_s > 0) printf("plan_rate_hz %.1f Hz\n", (double)plans / task_s);
   if (io.nages) {
     printf("plan_age_ms_p50 %.1f ms\n", nd_quantile(ages, io.nages, 0.5));

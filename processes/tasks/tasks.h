@@ -107,6 +107,8 @@ typedef struct {
   double *ages;       /* MAX_PLAN_AGES: publication minus state time of each plan, ms */
   int nages;
   int no_record;      /* the next task is not recorded: the object was not at rest */
+  int robot_stopped;  /* the newest ROBOT_STATE said STOPPED (1) or not (0); -1 before one */
+  int stops_between;  /* reflex stops that began while no task ran (a release, idle) */
 } tasks_io;
 
 /* How one task ended. */

@@ -16,11 +16,12 @@
 #    reflex's name. The next task resumes the arm (ROBOT_STATE tracks again) and runs
 #    (from the stretched pose the reflex left, it may stop on one of its own: counted too).
 # 3. nudge-up demo --world lab on the lab goal chain: all five tasks run, every stop is
-#    reported (the runner's reflex_stops equals its stopped tasks, the bridge logged at
-#    least as many), the run stops cleanly and leaves nothing behind. How many goals it
-#    reaches is printed (lab_reached) and asserted only >= 1, at the task runner's eps 1e-2
-#    rather than the demo's 1e-3: a starved planner on a loaded 2-core VM stops and goes
-#    (test_system says why), and the arm it leaves behind may stop on its reflexes.
+#    reported (the runner's reflex_stops equals its stopped tasks; the bridge logged at
+#    least as many as the runner counted in tasks and between them), the run stops
+#    cleanly and leaves nothing behind. How many goals it reaches is printed
+#    (lab_reached) and asserted only >= 1, at the task runner's eps 1e-2 rather than the
+#    demo's 1e-3: a starved planner on a loaded 2-core VM stops and goes (test_system says
+#    why), and the arm it leaves behind may stop on its reflexes.
 # 4. An object left outside the arm's box (x 0.165, where the lab box ends at 0.15): one
 #    short task toward the box's inside; the planner's log says where the object is and
 #    that the sphere cannot get behind it, once, and the task ends.
@@ -154,8 +155,11 @@ stopped=$(grep -c '^task .* stopped after ' "$PT_WORK/demo.out")
 counted=$(fig reflex_stops "$PT_WORK/demo.out")
 logged=$(grep -c 'the robot stopped:' "$DEMO/bridge.log")
 pt_figure lab_reflex_stops "${counted:-0}" count
+between=$(fig reflex_stops_between "$PT_WORK/demo.out")
 pt_check "every stop in a task is reported (runner $counted, task lines $stopped, bridge log $logged)" \
   test "${counted:-x}" = "$stopped" -a "$logged" -ge "$stopped"
+pt_check "the runner's stops, in tasks and between, are the bridge's or fewer ($counted + ${between:-x}, $logged)" \
+  test -n "$between" -a $((counted + ${between:-0})) -le "$logged"
 pt_check "the bridge ran the lab world" grep -q 'lab world' "$DEMO/bridge.log"
 pt_restarts_are "$DEMO"
 pt_none_left "$DEMO"

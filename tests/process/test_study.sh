@@ -109,9 +109,12 @@ pt_check "the planner planned the training tasks at $TV m/s" \
 fig() { awk -v n="$1" '$1 == n { print $2 }' "$PT_WORK/study.out"; }
 for f in eval_success_ep0 eval_success_ep2 eval_success_last eval_time_ratio_ep2 \
   eval_time_ratio_last val_loss_ratio_ep2 reflex_stops runs_sliding_within5pct_ep2 \
-  torsional_err_drop_pct_last sliding_err_pct_max; do
+  torsional_err_drop_pct_last sliding_err_pct_max reflex_stops_robot; do
   pt_check "summary line $f ($(fig "$f"))" test -n "$(fig "$f")"
 done
+bridge_stops=$(grep -h 'the robot stopped:' "$OUT"/run_*/logs/bridge.log | wc -l)
+pt_check "reflex_stops_robot is the bridges' stops ($(fig reflex_stops_robot), $bridge_stops logged)" \
+  test "$(fig reflex_stops_robot)" = "$bridge_stops"
 pt_check "val_loss_ratio_ep2 below 1 ($(fig val_loss_ratio_ep2))" \
   awk -v v="$(fig val_loss_ratio_ep2)" 'BEGIN { exit !(v != "" && v < 1) }'
 pt_check "summary.csv: a header and episodes 0..2" \
