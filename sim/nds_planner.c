@@ -100,6 +100,34 @@ static double ws_outside(const nds_planner_cfg *c, const double pos[2], const do
   return worst;
 }
 
+/* Accumulate into pk (squared v and a while accumulating) the peaks of segment seg's
+ * setpoints, n samples over its duration; with early set, stop at the first beyond a
+ * limit and return 1. */
+static int seg_peaks(const nds_planner_cfg *c, const nd_snap_seg *seg, int n, int early,
+                     nds_peaks *pk) {
+  const double v2_max = c->v_max * c->v_max, a2_max = c->a_max * c->a_max;
+  double sp[2][4];
+  for (int j = 0; j < n; j++) {
+    nd_snap_seg_eval(seg, j * seg->T / n, sp);
+    const double sv = sp[0][ND_V] * sp[0][ND_V] + sp[1][ND_V] * sp[1][ND_V];
+    const double sa = sp[0][ND_A] * sp[0][ND_A] + sp[1][ND_A] * sp[1][ND_A];
+    const double pos[2] = {sp[0][ND_P], sp[1][ND_P]};
+    if (!(sv <= pk->v)) pk->v = sv;
+    if (!(sa <= pk->a)) pk->a = sa;
+    const double o = ws_outside(c, pos, NULL);
+    if (!(o <= pk->outside)) pk->outside = o;
+    if (c->reach) {
+      const double vel[2] = {sp[0][ND_V], sp[1][ND_V]}, acc[2] = {sp[0][ND_A], sp[1][ND_A]};
+      const double l = nds_reach_load(c->reach, pos, vel, acc);
+      if (!(l <= pk->load)) pk->load = l;
+    }
+    if (early && !(pk->v <= v2_max && pk->a <= a2_max && pk->load <= c->reach_max &&
+                   pk->outside <= 0.0))
+      return 1;
+  }
+  return 0;
+}
+
 /* Peaks over the setpoints of keys from sp0, sampled at the rollouts' step: speed,
  * acceleration, with an arm its load (nds_reach_load), and how far the segments, or the
  * executor's brake after the first, leave the workspace. The setpoints alone decide them:
@@ -108,39 +136,34 @@ static double ws_outside(const nds_planner_cfg *c, const double pos[2], const do
 static void setpoint_peaks(const nds_planner *p, const double *keys, int early, nds_peaks *pk) {
   const nds_planner_cfg *c = &p->cfg;
   nd_snap_seg seg;
-  double s[2][4], sp[2][4];
+  double s[2][4];
   memcpy(s, p->sp0, sizeof(s));
   const int n = (int)ceil(c->T / nds_batch_model(p->batch, 0)->m->opt.timestep - 1e-9);
-  const double v2_max = c->v_max * c->v_max, a2_max = c->a_max * c->a_max;
-  double v2 = 0.0, a2 = 0.0, load = 0.0;
-  double out = ws_outside(c, keys, keys + 2);
+  *pk = (nds_peaks){.outside = ws_outside(c, keys, keys + 2)};
   for (int i = 0; i < c->M; i++) {
     const double *k = keys + 4 * i;
     nd_snap_seg_make(&seg, (const double(*)[4])s, k, k + 2, c->T);
-    for (int j = 0; j < n; j++) {
-      nd_snap_seg_eval(&seg, j * c->T / n, sp);
-      const double sv = sp[0][ND_V] * sp[0][ND_V] + sp[1][ND_V] * sp[1][ND_V];
-      const double sa = sp[0][ND_A] * sp[0][ND_A] + sp[1][ND_A] * sp[1][ND_A];
-      const double pos[2] = {sp[0][ND_P], sp[1][ND_P]};
-      if (!(sv <= v2)) v2 = sv;
-      if (!(sa <= a2)) a2 = sa;
-      const double o = ws_outside(c, pos, NULL);
-      if (!(o <= out)) out = o;
-      if (c->reach) {
-        const double vel[2] = {sp[0][ND_V], sp[1][ND_V]}, acc[2] = {sp[0][ND_A], sp[1][ND_A]};
-        const double l = nds_reach_load(c->reach, pos, vel, acc);
-        if (!(l <= load)) load = l;
-      }
-      if (early && !(v2 <= v2_max && a2 <= a2_max && load <= c->reach_max && out <= 0.0))
-        goto done;
-    }
+    if (seg_peaks(c, &seg, n, early, pk)) break;
     nd_snap_seg_eval(&seg, c->T, s);
   }
-done:
-  pk->v = sqrt(v2);
-  pk->a = sqrt(a2);
-  pk->load = load;
-  pk->outside = out;
+  pk->v = sqrt(pk->v);
+  pk->a = sqrt(pk->a);
+}
+
+double nds_planner_rest_time(const nds_planner *p, const double sp0[2][4], const double key[2],
+                             double T) {
+  const nds_planner_cfg *c = &p->cfg;
+  const double h = nds_batch_model(p->batch, 0)->m->opt.timestep, zero[2] = {0.0, 0.0};
+  const double v2_max = c->v_max * c->v_max, a2_max = c->a_max * c->a_max;
+  if (!(T > 0.0)) T = h;
+  for (; T <= NDS_PLANNER_REST_T_MAX; T *= 1.1) {
+    nd_snap_seg seg;
+    nd_snap_seg_make(&seg, sp0, key, zero, T);
+    nds_peaks pk = {0};
+    seg_peaks(c, &seg, (int)ceil(T / h - 1e-9), 1, &pk);
+    if (pk.v <= v2_max && pk.a <= a2_max && pk.load <= c->reach_max) return T;
+  }
+  return -1.0;
 }
 
 /* A candidate beyond the limits costs a step penalty plus its relative excess, which ranks

@@ -185,12 +185,17 @@ static int publish_release(planner_proc *p, double now, const nd_release_box *b,
   m.M = 1;
   m.keypoints[0][0] = key[0];
   m.keypoints[0][1] = key[1];
-  m.T = PLANNER_RELEASE_T;
+  /* As quick as the planner's limits and the arm's joints allow: the executor would only
+   * stretch it to its own Cartesian limits, which across the lab's arm exceed the joints'. */
+  m.T = nds_planner_rest_time(p->planner, (const double(*)[4])sp0, key, PLANNER_RELEASE_T);
+  if (m.T < 0.0) m.T = PLANNER_RELEASE_T;
   m.predicted[0] = b->x;
   m.predicted[1] = b->y;
   m.predicted[2] = b->yaw;
   if (publish(p, &m, err, errlen)) return -1;
   p->released_at = now;
+  p->release_until = now + m.T;
+  memcpy(p->release_key, key, sizeof(p->release_key));
   return 0;
 }
 
@@ -211,6 +216,12 @@ int planner_release(planner_proc *p, double now, char *err, int errlen) {
 
 int planner_keep_clear(planner_proc *p, double now, char *err, int errlen) {
   const planner_opts *o = p->o;
+  if (now < p->release_until) {
+    if (now - p->released_at < PLANNER_RELEASE_RENEW || !release_sensed(p, now)) return 0;
+    const nd_release_box b = release_box(p);
+    const double key[2] = {p->release_key[0], p->release_key[1]};
+    return publish_release(p, now, &b, key, err, errlen);
+  }
   if (!p->keep_clear || now - p->released_at < PLANNER_RECLEAR_WAIT || !release_sensed(p, now))
     return 0;
   const nd_release_box b = release_box(p);

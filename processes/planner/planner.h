@@ -46,8 +46,12 @@ typedef struct {
  * once per task: the sphere cannot get behind it to push it back. */
 #define PLANNER_EDGE_WARN 0.005
 #define PLANNER_PRE_MAX 256
-/* The release's segment duration, s: the executor lengthens it as its limits need. */
+/* The release's shortest segment, s; lengthened to the planner's limits and arm load. */
 #define PLANNER_RELEASE_T 0.1
+/* The executor brakes at its own Cartesian limits once no plan has come for its plan
+ * timeout (0.3 s by default): a release segment that lasts longer is re-sent every
+ * PLANNER_RELEASE_RENEW s until it ends, and the same keypoint only renews it. */
+#define PLANNER_RELEASE_RENEW 0.1
 /* After a release the object may still slide and turn a corner onto the resting sphere:
  * while idle, a gap below PLANNER_RECLEAR x --release sends the sphere clear again, at
  * most once per PLANNER_RECLEAR_WAIT s (a release's segment gets time to move it first).
@@ -93,6 +97,8 @@ typedef struct {
   int release_due;             /* the task ended: one PLAN sends the sphere clear (nd_release) */
   int keep_clear;              /* released and idle: the sphere is kept clear of the object */
   double released_at;          /* when the last release was published, s (ndp_mono) */
+  double release_until;        /* when its segment ends, s (ndp_mono) */
+  double release_key[2];       /* where it rests the sphere */
   double obj_half[2], ee_radius; /* the model's object half sides and sphere radius, m */
 
   double plan_s;               /* recent plan time, s (moving average) */
@@ -130,9 +136,9 @@ int planner_plan_once(planner_proc *p, double now, char *err, int errlen);
  * or -1 with a message (LCM). */
 int planner_release(planner_proc *p, double now, char *err, int errlen);
 
-/* While idle after a release: if the object has come closer to the sphere than
- * PLANNER_RECLEAR x --release, publish the release again (PLANNER_RECLEAR_*). Return 0, or
- * -1 with a message (LCM). */
+/* While idle after a release: re-send it until its segment ends (PLANNER_RELEASE_RENEW);
+ * then, if the object has come closer to the sphere than PLANNER_RECLEAR x --release,
+ * publish the release again (PLANNER_RECLEAR_*). Return 0, or -1 with a message (LCM). */
 int planner_keep_clear(planner_proc *p, double now, char *err, int errlen);
 
 #endif

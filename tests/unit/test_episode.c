@@ -148,6 +148,64 @@ static void test_redraws(void **state) {
   assert_true(out[1].over_limits * out[0].evals < out[0].over_limits * out[1].evals);
 }
 
+/* Peak arm load and acceleration of the segment from sp0 to rest at key in T, sampled at
+ * 1 ms. */
+static void rest_peaks(const nds_reach *r, const double sp0[2][4], const double key[2], double T,
+                       double *load, double *acc) {
+  nd_snap_seg seg;
+  nd_snap_seg_make(&seg, sp0, key, (const double[2]){0.0, 0.0}, T);
+  *load = *acc = 0.0;
+  for (int j = 0; j <= (int)(T * 1e3); j++) {
+    double sp[2][4];
+    nd_snap_seg_eval(&seg, 1e-3 * j, sp);
+    const double p[2] = {sp[0][ND_P], sp[1][ND_P]}, v[2] = {sp[0][ND_V], sp[1][ND_V]},
+                 a[2] = {sp[0][ND_A], sp[1][ND_A]};
+    *load = fmax(*load, nds_reach_load(r, p, v, a));
+    *acc = fmax(*acc, hypot(a[0], a[1]));
+  }
+}
+
+/* The release's segment (nds_planner_rest_time) at the lab's caps with its arm map at 0.9:
+ * the sphere at 0.4 m/s comes to rest 2 cm on. Radially (x) the joints need a longer
+ * segment than the caps alone; across (y) less. Each duration found keeps the load within
+ * 0.9, and one a tenth shorter would not. */
+static void test_rest_time(void **state) {
+  fixture *f = *state;
+  nds_reach r;
+  char err[256];
+  const double lo[2] = {-0.15, -0.30}, hi[2] = {0.15, 0.40};
+  if (nds_reach_build_ws(&r, lo, hi, err, sizeof err)) fail_msg("%s", err);
+  nds_planner_cfg cfg = *nds_planner_config(f->planner);
+  cfg.v_max = 0.7, cfg.a_max = 3.0, cfg.T = 0.6, cfg.pop = 8, cfg.iters = 1;
+  double t_arm[2], t_caps[2];
+  for (int arm = 0; arm < 2; arm++) {
+    cfg.reach = arm ? &r : NULL;
+    cfg.reach_max = 0.9;
+    nds_planner *p = nds_planner_create(&f->plan, &cfg, f->pool, err, sizeof(err));
+    assert_non_null(p);
+    for (int ax = 0; ax < 2; ax++) {
+      double sp0[2][4] = {{0.0}, {0.05}}, key[2] = {0.0, 0.05};
+      sp0[ax][ND_V] = 0.4;
+      key[ax] += 0.02;
+      const double T = nds_planner_rest_time(p, (const double(*)[4])sp0, key, 0.1);
+      assert_true(T >= 0.1);
+      (arm ? t_arm : t_caps)[ax] = T;
+      double load, acc, load_short, acc_short;
+      rest_peaks(&r, (const double(*)[4])sp0, key, T, &load, &acc);
+      rest_peaks(&r, (const double(*)[4])sp0, key, T / 1.1, &load_short, &acc_short);
+      printf("rest_time %s along %c: %.3f s, load %.2f, %.2f m/s^2 (a tenth shorter: %.2f, "
+             "%.2f m/s^2)\n", arm ? "arm" : "caps", "xy"[ax], T, load, acc, load_short, acc_short);
+      assert_true(acc <= 3.0 * 1.02);
+      if (arm) assert_true(load <= 0.9 * 1.02), assert_true(load_short > 0.9 || acc_short > 3.0 || T <= 0.1);
+      else if (T > 0.1) assert_true(acc_short > 3.0 * 0.98);
+    }
+    nds_planner_free(p);
+  }
+  assert_true(t_arm[0] > t_caps[0] * 1.05);  /* radially the joints bind, not the caps */
+  assert_true(t_arm[1] < t_arm[0]);
+  nds_reach_free(&r);
+}
+
 /* The limit checks and redraws run on the pool, so the plan is the same on 1 worker as on
  * 2; and the prediction the plan reports is the rollout of its best keypoints, not of
  * another candidate. */
@@ -327,6 +385,7 @@ int main(void) {
       cmocka_unit_test(test_arrival),
       cmocka_unit_test(test_deterministic),
       cmocka_unit_test(test_redraws),
+      cmocka_unit_test(test_rest_time),
       cmocka_unit_test(test_plan_pool_and_prediction),
       cmocka_unit_test(test_speed_limit),
       cmocka_unit_test(test_workspace_edge),
