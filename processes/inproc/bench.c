@@ -449,8 +449,9 @@ int main(int argc, char **argv) {
     }
   }
 
-  /* 6. The lab world: the same pushes (32 of them), slowed to what nudge-up --world lab
-   * lets the planner send (0.45 m/s, 1.8 m/s^2), tracked by the arm in 1 ms steps, each
+  /* 6. The lab world: the same pushes (32 of them), slowed to what the arm takes in every
+   * direction (0.45 m/s, 1.8 m/s^2; the live planner goes beyond where its arm map lets it,
+   * doc/decisions.md#lab-caps), tracked by the arm in 1 ms steps, each
    * timed; the arm's tracking error and reflex stops; the planning model at 5 ms and at the
    * live planner's 10 ms against the lab world's outcome, next to the same against the
    * ideal world. */

@@ -317,6 +317,32 @@ static void test_ik_workspace_grid(void **state) {
  * terms), serves the lab box at the lab's 0.5 m/s, tells radial from cross motion, shows
  * where beyond the box the arm cannot go that fast, and is infinite where there is no IK or
  * no map. */
+/* Why the lab's Cartesian caps may exceed what every direction allows (nudge-up's
+ * LAB_PLAN_A 2.5 m/s^2 at LAB_ARM_LOAD 0.9, decisions#lab-caps): from rest, across the
+ * arm's reach (y) the joints take 2.5 m/s^2 within 0.9 of their limits at most points of
+ * the lab box, radially (x) at few; the planner's arm map tells the two apart per plan. */
+static void test_reach_lab_caps(void **state) {
+  (void)state;
+  nds_reach r;
+  char err[256];
+  const double lo[2] = {NDS_PANDA_WS_XMIN, NDS_PANDA_WS_YMIN},
+               hi[2] = {NDS_PANDA_WS_XMAX, NDS_PANDA_WS_YMAX}, zero[2] = {0.0, 0.0};
+  if (nds_reach_build_ws(&r, lo, hi, err, sizeof err)) fail_msg("%s", err);
+  int n = 0, ok_x = 0, ok_y = 0;
+  for (double x = lo[0]; x <= hi[0] + 1e-9; x += 0.05)
+    for (double y = lo[1]; y <= hi[1] + 1e-9; y += 0.05) {
+      const double p[2] = {x, y};
+      n++;
+      ok_x += nds_reach_load(&r, p, zero, (const double[2]){2.5, 0.0}) <= 0.9;
+      ok_y += nds_reach_load(&r, p, zero, (const double[2]){0.0, 2.5}) <= 0.9;
+    }
+  print_message("reach_lab_caps: 2.5 m/s^2 from rest within 0.9 of the joint limits along x at "
+                "%d, along y at %d of %d points\n", ok_x, ok_y, n);
+  assert_true(2 * ok_y > n);
+  assert_true(2 * ok_x < n);
+  nds_reach_free(&r);
+}
+
 static void test_reach_map(void **state) {
   (void)state;
   nds_panda_cfg cfg;
@@ -822,6 +848,7 @@ int main(void) {
       cmocka_unit_test(test_brake_holds),
       cmocka_unit_test(test_reflex_kinds),
       cmocka_unit_test(test_reach_map),
+      cmocka_unit_test(test_reach_lab_caps),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
