@@ -15,6 +15,8 @@
 #    says STOPPED with the joint, the task runner ends the task as stopped with the
 #    reflex's name. The next task resumes the arm (ROBOT_STATE tracks again) and runs
 #    (from the stretched pose the reflex left, it may stop on one of its own: counted too).
+#    Then plans out of reach while the runner waits between two tasks: the arm stops with
+#    no task running, and the runner counts it as reflex_stops_between and names it.
 # 3. nudge-up demo --world lab on the lab goal chain: all five tasks run, every stop is
 #    reported (the runner's reflex_stops equals its stopped tasks; the bridge logged at
 #    least as many as the runner counted in tasks and between them), the run stops
@@ -105,6 +107,24 @@ if pt_up_wait "$RUN" 30 "$up"; then
     pt_fail "nudge-tasks did not finish"
   fi
   cat "$PT_WORK/reflex-tasks.out"
+  # A stop between tasks: the runner waits --settle 3 s after its first task; plans to
+  # (0.45, 0) sent then stop the arm with no task running. The runner counts and names it.
+  n_rel=$(grep -c 'released' "$RUN/planner.log")
+  n_stop=$(grep -c 'the robot stopped' "$RUN/bridge.log")
+  pt_spawn tasks "$PT_BIN/nudge-tasks" --world lab --goal 0.0,0.15,0 --goal 0.0,0.05,0 \
+    --tau "$(pt_slow 8)" --settle 3 >"$PT_WORK/between-tasks.out" 2>"$PT_WORK/between-tasks.err"
+  pt_wait_for 30 eval '(( $(grep -c released "$RUN/planner.log") > n_rel ))' ||
+    pt_fail "the first task did not end"
+  for ((i = 0; i < 20; i++)); do
+    (($(grep -c 'the robot stopped' "$RUN/bridge.log") > n_stop)) && break
+    "$PT_INJ" --plan-to 0.45,0 --repeat 5 --gap-ms 20 >/dev/null || pt_fail "nudge-inject --plan-to failed"
+  done
+  pt_wait_pid "$tasks" 60 || pt_fail "nudge-tasks did not finish the tasks around a stop"
+  cat "$PT_WORK/between-tasks.out"
+  pt_check "the stop between tasks is counted" \
+    grep -q '^reflex_stops_between 1 count' "$PT_WORK/between-tasks.out"
+  pt_check "and named" \
+    grep -qE 'stopped on a reflex between tasks: joint [1-7]' "$PT_WORK/between-tasks.err"
   pt_stop_logger
   pt_up_stop "$up" 30
   pt_check "nudge-up run exits 0 after SIGINT (got $PT_RC)" test "$PT_RC" -eq 0
