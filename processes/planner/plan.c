@@ -173,9 +173,10 @@ static double release_key(const planner_proc *p, const nd_release_box *b, double
                            key);
 }
 
-/* Publish the PLAN that rests the sphere at key[2] (the object b predicted to stay). */
+/* Publish the PLAN that rests the sphere at key[2] (the object b predicted to stay); renew:
+ * the one before re-sent, its segment's end unchanged. */
 static int publish_release(planner_proc *p, double now, const nd_release_box *b,
-                           const double key[2], char *err, int errlen) {
+                           const double key[2], int renew, char *err, int errlen) {
   double sp0[2][4];
   start_setpoint(p, now, sp0);
   nudge_plan_t m;
@@ -194,8 +195,10 @@ static int publish_release(planner_proc *p, double now, const nd_release_box *b,
   m.predicted[2] = b->yaw;
   if (publish(p, &m, err, errlen)) return -1;
   p->released_at = now;
-  p->release_until = now + m.T;
-  memcpy(p->release_key, key, sizeof(p->release_key));
+  if (!renew) {
+    p->release_until = now + m.T;
+    memcpy(p->release_key, key, sizeof(p->release_key));
+  }
   return 0;
 }
 
@@ -206,7 +209,7 @@ int planner_release(planner_proc *p, double now, char *err, int errlen) {
   const nd_release_box b = release_box(p);
   double key[2];
   const double moved = release_key(p, &b, key);
-  if (publish_release(p, now, &b, key, err, errlen)) return -1;
+  if (publish_release(p, now, &b, key, 0, err, errlen)) return -1;
   p->keep_clear = o->release > 0.0;
   fprintf(stderr, PROG ": task %lld: released: the sphere rests at (%+.3f, %+.3f) m, %.1f mm "
           "out, at least %g m clear of the object\n", (long long)p->task.task_id, key[0], key[1],
@@ -220,7 +223,7 @@ int planner_keep_clear(planner_proc *p, double now, char *err, int errlen) {
     if (now - p->released_at < PLANNER_RELEASE_RENEW || !release_sensed(p, now)) return 0;
     const nd_release_box b = release_box(p);
     const double key[2] = {p->release_key[0], p->release_key[1]};
-    return publish_release(p, now, &b, key, err, errlen);
+    return publish_release(p, now, &b, key, 1, err, errlen);
   }
   if (!p->keep_clear || now - p->released_at < PLANNER_RECLEAR_WAIT || !release_sensed(p, now))
     return 0;
@@ -237,7 +240,7 @@ int planner_keep_clear(planner_proc *p, double now, char *err, int errlen) {
             1e3 * gap);
     return 0;
   }
-  if (publish_release(p, now, &b, key, err, errlen)) return -1;
+  if (publish_release(p, now, &b, key, 0, err, errlen)) return -1;
   fprintf(stderr, PROG ": task %lld: the object came within %.1f mm of the sphere after the "
           "release: sent clear again, to (%+.3f, %+.3f) m, %.1f mm out\n",
           (long long)p->task.task_id, 1e3 * gap, key[0], key[1], 1e3 * moved);
