@@ -154,14 +154,12 @@ double nds_planner_rest_time(const nds_planner *p, const double sp0[2][4], const
                              double T) {
   const nds_planner_cfg *c = &p->cfg;
   const double h = nds_batch_model(p->batch, 0)->m->opt.timestep, zero[2] = {0.0, 0.0};
-  const double v2_max = c->v_max * c->v_max, a2_max = c->a_max * c->a_max;
   if (!(T > 0.0)) T = h;
   for (; T <= NDS_PLANNER_REST_T_MAX; T *= 1.1) {
     nd_snap_seg seg;
     nd_snap_seg_make(&seg, sp0, key, zero, T);
     nds_peaks pk = {0};
-    seg_peaks(c, &seg, (int)ceil(T / h - 1e-9), 1, &pk);
-    if (pk.v <= v2_max && pk.a <= a2_max && pk.load <= c->reach_max) return T;
+    if (!seg_peaks(c, &seg, (int)ceil(T / h - 1e-9), 1, &pk)) return T;
   }
   return -1.0;
 }
@@ -243,13 +241,16 @@ static int plan_cost(void *ctx, const double *x, int n, double *cost) {
   for (int k = 0; k < m; k++) {
     const nds_rollout_out *o = &p->outs[k];
     const int i = p->feas_idx[k];
-    const double task =
-        c->arrival > 0.0
-            ? nd_cost_arrival(&c->w, p->goal, c->arrival * p->goal->eps, o->obj_at, NDS_ROLLOUT_NS)
-            : nd_task_error(&c->w, p->goal, o->obj_xy, o->obj_yaw);
-    cost[i] = o->diverged ? INFINITY
-                          : nd_cost_plan(&c->w, p->goal, task, o->obj_xy, o->ee_xy, o->acc_sq_mean) +
-                                c->w.w_edge * nd_cost_edge(&c->w, p->goal, o->obj_xy, c->ws_lo, c->ws_hi);
+    if (o->diverged) {
+      cost[i] = INFINITY;
+    } else {
+      const double task =
+          c->arrival > 0.0
+              ? nd_cost_arrival(&c->w, p->goal, c->arrival * p->goal->eps, o->obj_at, NDS_ROLLOUT_NS)
+              : nd_task_error(&c->w, p->goal, o->obj_xy, o->obj_yaw);
+      cost[i] = nd_cost_plan(&c->w, p->goal, task, o->obj_xy, o->ee_xy, o->acc_sq_mean) +
+                c->w.w_edge * nd_cost_edge(&c->w, p->goal, o->obj_xy, c->ws_lo, c->ws_hi);
+    }
     /* The best rollout so far, so the plan's prediction needs no rollout of its own. */
     if (cost[i] < p->seen_cost) {
       p->seen_cost = cost[i];

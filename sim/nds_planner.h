@@ -94,9 +94,9 @@ void nds_planner_reset(nds_planner *p);
 int nds_planner_set_v_max(nds_planner *p, double v_max, char *err, int errlen);
 
 /* The shortest duration from T on (stretched by 1.1) of a segment from setpoint sp0 to
- * rest at key whose setpoints keep to the planner's speed, acceleration and arm load (the
- * workspace is the caller's); -1 if none up to NDS_PLANNER_REST_T_MAX s. For a move the
- * planner does not search, as the release after a task. */
+ * rest at key whose setpoints keep to the planner's speed, acceleration, arm load and
+ * workspace, as a candidate's must; -1 if none up to NDS_PLANNER_REST_T_MAX s. For a move
+ * the planner does not search, as the release after a task. */
 double nds_planner_rest_time(const nds_planner *p, const double sp0[2][4], const double key[2],
                              double T);
 #define NDS_PLANNER_REST_T_MAX 2.0

@@ -52,7 +52,8 @@ static void sample(const bridge_cmd *c, double h, double sp[2][4]) {
 }
 
 /* Add the join's offset at utime to sp, first starting one if this step samples another
- * command than the step before did from a future, and the two disagree (BRIDGE_JOIN_S). */
+ * command than the step before did from a future: the offset is what separates the two
+ * there, 0 when the new command goes on along the old one's trajectory (BRIDGE_JOIN_S). */
 static void join(bridge_loop *b, int64_t utime, double sp[2][4]) {
   bridge_sample *sa = &b->sample[0];
   const bridge_sample *before = &b->sample[1];
@@ -68,8 +69,8 @@ static void join(bridge_loop *b, int64_t utime, double sp[2][4]) {
     else nd_snap_seg_eval(&b->join, t, off), sa->join = t;
   }
   const bridge_cmd *now = sa->how == BRIDGE_SAMPLE_PREV ? &b->prev : &b->last;
-  if (before->how != BRIDGE_SAMPLE_HOLD && before->h > BRIDGE_CMD_TAYLOR &&
-      (now->seq != b->src.seq || now->utime != b->src.utime)) {
+  const int other = now->seq != b->src.seq || now->utime != b->src.utime;
+  if (other && before->how != BRIDGE_SAMPLE_HOLD && before->h > BRIDGE_CMD_TAYLOR) {
     /* Where the step before's trajectory (and offset) goes on to, less where this one is. */
     double was[2][4];
     sample(&b->src, 1e-6 * (double)(utime - b->src.utime), was);
@@ -86,7 +87,7 @@ static void join(bridge_loop *b, int64_t utime, double sp[2][4]) {
       sa->join = 0;
     }
   }
-  b->src = *now;
+  if (other) b->src = *now;
   if (!b->joining) return;
   for (int k = 0; k < 2; k++)
     for (int i = 0; i < 4; i++) sp[k][i] += off[k][i];

@@ -222,8 +222,7 @@ int planner_keep_clear(planner_proc *p, double now, char *err, int errlen) {
   if (now < p->release_until) {
     if (now - p->released_at < PLANNER_RELEASE_RENEW || !release_sensed(p, now)) return 0;
     const nd_release_box b = release_box(p);
-    const double key[2] = {p->release_key[0], p->release_key[1]};
-    return publish_release(p, now, &b, key, 1, err, errlen);
+    return publish_release(p, now, &b, p->release_key, 1, err, errlen);
   }
   if (!p->keep_clear || now - p->released_at < PLANNER_RECLEAR_WAIT || !release_sensed(p, now))
     return 0;

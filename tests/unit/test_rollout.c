@@ -19,6 +19,19 @@ static void sp_at(double x, double y, double sp[2][4]) {
 }
 
 /* The sphere away from the box: a two-keypoint move ending at rest. */
+/* The test model at step dt with theta th (NULL: the truth), its mjData, and the default
+ * controller in ctrl; close_model frees both. */
+static mjData *open_model(nds_model *nm, double dt, const double *th, nds_ctrl_cfg *ctrl) {
+  nds_test_build(nm, dt, th);
+  nds_ctrl_cfg_default(ctrl);
+  return mj_makeData(nm->m);
+}
+
+static void close_model(nds_model *nm, mjData *d) {
+  mj_deleteData(d);
+  nds_model_free(nm);
+}
+
 static const double free_keys[8] = {-0.2, 0.25, 0.3, 0.1, -0.1, 0.2, 0, 0};
 
 static void free_start(const nds_model *nm, nds_state *s, double sp[2][4]) {
@@ -35,10 +48,8 @@ static void test_tracks_keypoints(void **state) {
   const double dts[4] = {0.001, 0.002, 0.005, 0.01};
   for (int i = 0; i < 4; i++) {
     nds_model nm;
-    nds_test_build(&nm, dts[i], NULL);
-    mjData *d = mj_makeData(nm.m);
     nds_ctrl_cfg ctrl;
-    nds_ctrl_cfg_default(&ctrl);
+    mjData *d = open_model(&nm, dts[i], NULL, &ctrl);
     nds_state s0;
     double sp0[2][4];
     free_start(&nm, &s0, sp0);
@@ -74,16 +85,13 @@ static void test_tracks_keypoints(void **state) {
     assert_near(o.acc_sq_mean, acc / n, 1e-9 * acc / n);
     assert_near(o.v_peak, vpk, 1e-12);
     assert_near(o.a_peak, apk, 1e-12);
-    mj_deleteData(d);
-    nds_model_free(&nm);
+    close_model(&nm, d);
   }
 
   /* A duration that is not a whole number of steps rounds to the nearest. */
   nds_model nm;
-  nds_test_build(&nm, 0.007, NULL);
-  mjData *d = mj_makeData(nm.m);
   nds_ctrl_cfg ctrl;
-  nds_ctrl_cfg_default(&ctrl);
+  mjData *d = open_model(&nm, 0.007, NULL, &ctrl);
   nds_state s0;
   double sp0[2][4];
   free_start(&nm, &s0, sp0);
@@ -91,8 +99,7 @@ static void test_tracks_keypoints(void **state) {
   nds_rollout(&nm, d, &ctrl, &s0, (const double(*)[4])sp0, free_keys, 2, 0.3, &o);
   assert_int_equal(o.diverged, 0);
   assert_near(d->time, 86 * 0.007, 1e-12); /* round(0.6 / 0.007) = 86 */
-  mj_deleteData(d);
-  nds_model_free(&nm);
+  close_model(&nm, d);
 }
 
 /* The lightest supported sphere at the coarsest supported step still tracks. */
@@ -100,10 +107,8 @@ static void test_light_sphere_coarse_step(void **state) {
   (void)state;
   const double th[ND_NTHETA] = {1, 0.005, 1e-4, 0.2};
   nds_model nm;
-  nds_test_build(&nm, 0.01, th);
-  mjData *d = mj_makeData(nm.m);
   nds_ctrl_cfg ctrl;
-  nds_ctrl_cfg_default(&ctrl);
+  mjData *d = open_model(&nm, 0.01, th, &ctrl);
   nds_state s0;
   double sp0[2][4];
   free_start(&nm, &s0, sp0);
@@ -112,8 +117,7 @@ static void test_light_sphere_coarse_step(void **state) {
   assert_int_equal(o.diverged, 0);
   assert_near(o.ee_xy[0], -0.1, 2e-3);
   assert_near(o.ee_xy[1], 0.2, 2e-3);
-  mj_deleteData(d);
-  nds_model_free(&nm);
+  close_model(&nm, d);
 }
 
 /* The sphere at rest 10 cm behind the box (at the origin) on the x axis, its setpoint
@@ -129,10 +133,8 @@ static void behind_start(const nds_model *nm, nds_state *s, double sp[2][4]) {
 static double push_distance(double slide) {
   const double th[ND_NTHETA] = {slide, 0.005, 1e-4, 1.0};
   nds_model nm;
-  nds_test_build(&nm, 0.001, th);
-  mjData *d = mj_makeData(nm.m);
   nds_ctrl_cfg ctrl;
-  nds_ctrl_cfg_default(&ctrl);
+  mjData *d = open_model(&nm, 0.001, th, &ctrl);
   nds_state s0;
   double sp0[2][4];
   behind_start(&nm, &s0, sp0);
@@ -144,8 +146,7 @@ static double push_distance(double slide) {
   assert_near(o.obj_yaw, 0, 1e-2);
   assert_near(o.ee_xy[0], 0, 5e-3); /* the integral still unwinds what the push wound up */
   assert_true(fabs(d->qvel[0]) < 1e-3); /* the box has come to rest */
-  mj_deleteData(d);
-  nds_model_free(&nm);
+  close_model(&nm, d);
   return o.obj_xy[0];
 }
 
@@ -165,10 +166,8 @@ static void test_friction_changes_push(void **state) {
 static void test_samples_along_horizon(void **state) {
   (void)state;
   nds_model nm;
-  nds_test_build(&nm, 0.001, NULL);
-  mjData *d = mj_makeData(nm.m);
   nds_ctrl_cfg ctrl;
-  nds_ctrl_cfg_default(&ctrl);
+  mjData *d = open_model(&nm, 0.001, NULL, &ctrl);
   nds_state s0;
   double sp0[2][4];
   behind_start(&nm, &s0, sp0);
@@ -188,8 +187,7 @@ static void test_samples_along_horizon(void **state) {
   printf("sampled_object_x %.4f %.4f %.4f m (first, mid, last)\n", full.obj_at[0][0],
          full.obj_at[half][0], full.obj_at[last][0]);
   assert_true(full.obj_at[last][0] > full.obj_at[0][0] + 0.02);
-  mj_deleteData(d);
-  nds_model_free(&nm);
+  close_model(&nm, d);
 }
 
 /* Rollouts from the same state and plan are bitwise identical on every worker, in a
@@ -298,10 +296,8 @@ static void test_deterministic(void **state) {
 static void test_divergence(void **state) {
   (void)state;
   nds_model nm;
-  nds_test_build(&nm, 0.01, NULL);
-  mjData *d = mj_makeData(nm.m);
   nds_ctrl_cfg ctrl;
-  nds_ctrl_cfg_default(&ctrl);
+  mjData *d = open_model(&nm, 0.01, NULL, &ctrl);
   nds_state s0;
   double sp0[2][4];
   free_start(&nm, &s0, sp0);
@@ -353,8 +349,7 @@ static void test_divergence(void **state) {
   nds_rollout(&nm, d, &ctrl, &s0, (const double(*)[4])sp0, free_keys, 2, 0.3, &o);
   assert_memory_equal(&good, &o, sizeof(o));
   assert_int_equal(nds_test_warnings, 0);
-  mj_deleteData(d);
-  nds_model_free(&nm);
+  close_model(&nm, d);
 }
 
 /* Free flight changes no outcome: 96 random plans from starts far from, near and touching
@@ -370,10 +365,8 @@ static void test_free_flight_agrees(void **state) {
   long skipped = 0, steps = 0, far_skipped = 0, far_steps = 0;
   for (int k = 0; k < 2; k++) {
     nds_model nm;
-    nds_test_build(&nm, dts[k], NULL);
-    mjData *d = mj_makeData(nm.m);
     nds_ctrl_cfg ctrl;
-    nds_ctrl_cfg_default(&ctrl);
+    mjData *d = open_model(&nm, dts[k], NULL, &ctrl);
     for (int i = 0; i < 48; i++) {
       const double *e = starts[i % 3];
       nds_state s0;
@@ -403,8 +396,7 @@ static void test_free_flight_agrees(void **state) {
       if (i % 3 == 0) far_skipped += ff.skipped, far_steps += ff.steps;
       if (i % 3 == 2) assert_true(ff.skipped < ff.steps);
     }
-    mj_deleteData(d);
-    nds_model_free(&nm);
+    close_model(&nm, d);
   }
   printf("free_flight_worst_object %.2e m\nfree_flight_worst_sphere %.2e m\n", worst_obj, worst_ee);
   printf("free_flight_skipped %.3f of steps (from far: %.3f)\n", (double)skipped / steps,
@@ -478,10 +470,8 @@ static void test_planning_contact(void **state) {
 static void test_predict(void **state) {
   (void)state;
   nds_model nm;
-  nds_test_build(&nm, 0.005, NULL);
-  mjData *d = mj_makeData(nm.m);
   nds_ctrl_cfg ctrl;
-  nds_ctrl_cfg_default(&ctrl);
+  mjData *d = open_model(&nm, 0.005, NULL, &ctrl);
   nds_state s0, s1, sr;
   const double ee[2] = {-0.08, 0.01};
   nds_state_rest(&nm, 0, 0, 0.1, ee, &s0);
@@ -513,8 +503,7 @@ static void test_predict(void **state) {
   assert_int_equal(nds_predict(&nm, d, &ctrl, &s0, (const double(*)[2][4])sp, N, &s1, err,
                                sizeof err), -1);
   assert_non_null(strstr(err, "not finite"));
-  mj_deleteData(d);
-  nds_model_free(&nm);
+  close_model(&nm, d);
 }
 
 int main(void) {
