@@ -10,6 +10,7 @@
 
 #include "nd_linalg.h"
 #include "nd_math.h"
+#include "nd_release.h"
 #include "nd_rng.h"
 #include "nds_ctrl.h"
 #include "nds_state.h"
@@ -255,6 +256,20 @@ void nds_world_resume(nds_world *w) {
   w->stopped = 0;
   memset(&w->reflex, 0, sizeof(w->reflex));
   nds_panda_monitor_reset(&w->mon, w->m->opt.timestep, NDS_PANDA_ACCEL_WINDOW_PUSH);
+}
+
+double nds_world_place(nds_world *w, double x, double y, double yaw, double clear) {
+  const nd_release_box b = {x, y, yaw, {w->cfg.object.obj_half[0], w->cfg.object.obj_half[1]}};
+  double ee[2], n[2];
+  nds_world_ee(w, ee);
+  const double gap = nd_release_gap(&b, w->cfg.object.ee_radius, ee, n);
+  if (gap < clear) return gap;
+  double *q = w->d->qpos + w->obj_qpos;
+  q[0] = x, q[1] = y, q[2] = w->cfg.object.obj_half[2];
+  nd_yaw_quat(yaw, q + 3);
+  memset(w->d->qvel + w->obj_dof, 0, 6 * sizeof(double));
+  memset(w->d->qacc_warmstart + w->obj_dof, 0, 6 * sizeof(double));
+  return gap;
 }
 
 void nds_world_motion_start(nds_world *w) { nds_panda_monitor_new_motion(&w->mon); }

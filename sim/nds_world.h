@@ -114,6 +114,11 @@ void nds_world_resume(nds_world *w);
  * is 10^4 m/s^3 of jerk in one step). */
 void nds_world_motion_start(nds_world *w);
 
+/* Put the object at rest at (x, y, yaw) on the table, as an operator resets it between
+ * tasks, if the sphere's surface is at least clear (m) from its sides there. Returns that
+ * gap (m): the object is placed when it is >= clear, else left as it is. Allocation-free. */
+double nds_world_place(nds_world *w, double x, double y, double yaw, double clear);
+
 /* World time, s. */
 double nds_world_time(const nds_world *w);
 

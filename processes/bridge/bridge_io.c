@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "nd_exec.h"
+#include "nd_math.h"
 #include "ndp_validate.h"
 
 #define PROG "nudge-bridge"
@@ -70,14 +71,28 @@ static void use_task(void *user, const nudge_task_t *msg) {
   atomic_fetch_add(&io->b->resume_req, 1);
 }
 
+/* A PLACE goes to the loop once per place_id (it is re-sent until the object is seen
+ * there). */
+static void use_place(void *user, const nudge_place_t *msg) {
+  bridge_io *io = user;
+  io->st.received++;
+  if (msg->place_id == io->place_id) return;
+  io->place_id = msg->place_id;
+  const bridge_place pl = {msg->place_id, {msg->x, msg->y, msg->yaw}, msg->clear, ndp_mono()};
+  nd_mailbox_post(&io->b->place, &pl, sizeof(pl));
+}
+
 NDP_INPUT(nudge_ee_cmd_t, ndp_check_ee_cmd, on_ee_cmd_raw, use_ee_cmd, refuse)
+NDP_INPUT(nudge_place_t, ndp_check_place, on_place_raw, use_place, refuse)
 NDP_INPUT(nudge_task_t, ndp_check_task, on_task_raw, use_task, refuse)
 
 int bridge_io_subscribe(bridge_io *io, lcm_t *lcm, char *err, int errlen) {
-  io->task_id = -1;
+  io->task_id = io->place_id = -1;
   if (!lcm_subscribe(lcm, NDP_CH_EE_CMD, on_ee_cmd_raw, io) ||
-      !lcm_subscribe(lcm, NDP_CH_TASK, on_task_raw, io)) {
-    snprintf(err, errlen, "cannot subscribe to %s and %s", NDP_CH_EE_CMD, NDP_CH_TASK);
+      !lcm_subscribe(lcm, NDP_CH_TASK, on_task_raw, io) ||
+      !lcm_subscribe(lcm, NDP_CH_PLACE, on_place_raw, io)) {
+    snprintf(err, errlen, "cannot subscribe to %s, %s and %s", NDP_CH_EE_CMD, NDP_CH_TASK,
+             NDP_CH_PLACE);
     return -1;
   }
   return 0;
@@ -131,6 +146,19 @@ void bridge_io_report(bridge_io *io, uint64_t *version, const nd_rtloop_stats *l
             (long long)loop->skipped);
     io->skipped_said = loop->skipped;
     io->skip_said_at = now;
+  }
+  if (r->places > io->places_said || r->places_dropped > io->dropped_said) {
+    const double *p = r->place_pose;
+    if (r->places > io->places_said)
+      fprintf(stderr, PROG ": PLACE %lld: the object placed at (%+.3f, %+.3f) m, yaw %+.1f deg, "
+              "the sphere %.1f mm clear\n", (long long)r->place_id, p[0], p[1], p[2] * 180 / ND_PI,
+              1e3 * r->place_gap);
+    else
+      fprintf(stderr, PROG ": PLACE %lld dropped: the sphere stayed %.1f mm from the object's "
+              "sides at (%+.3f, %+.3f) m for %g s\n", (long long)r->place_id, 1e3 * r->place_gap,
+              p[0], p[1], BRIDGE_PLACE_WAIT);
+    io->places_said = r->places;
+    io->dropped_said = r->places_dropped;
   }
   char name[48];
   if (r->stops > io->stops_said) {

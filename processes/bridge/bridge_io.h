@@ -27,6 +27,8 @@ typedef struct {
   int64_t resets_said, skipped_said, stops_said, silent_said;
   double reset_said_at, skip_said_at, silent_said_at;
   int64_t task_id;          /* the newest TASK seen; -1 none */
+  int64_t place_id;         /* the newest PLACE seen; -1 none */
+  int64_t places_said, dropped_said;
   char state[64];           /* the heartbeat's state word ("stopped: joint 4 velocity") */
 } bridge_io;
 
@@ -45,7 +47,7 @@ typedef struct {
  * printed). */
 int bridge_options(int argc, char **argv, bridge_opts *o);
 
-/* Subscribe EE_CMD and TASK (a new task resumes a stopped arm). Return 0, or -1 with a
+/* Subscribe EE_CMD, TASK (a new task resumes a stopped arm) and PLACE. Return 0, or -1 with a
  * message. */
 int bridge_io_subscribe(bridge_io *io, lcm_t *lcm, char *err, int errlen);
 

@@ -15,6 +15,7 @@ void bridge_loop_init(bridge_loop *b, nds_world *w, double cmd_timeout) {
   b->cmd_timeout = cmd_timeout;
   nd_mailbox_init(&b->cmd);
   nd_mailbox_init(&b->report);
+  nd_mailbox_init(&b->place);
   nd_ring_init(&b->out);
   atomic_init(&b->resume_req, 0);
   b->holding = 1;  /* no command yet: hold the start position */
@@ -176,9 +177,30 @@ static void put_arm(bridge_loop *b, const nds_world_robot *r, int64_t utime) {
   b->arm_seq++;
 }
 
+/* The newest PLACE, applied once the sphere is its clear from the pose, or dropped after
+ * BRIDGE_PLACE_WAIT. 1 when the report has news. */
+static int place(bridge_loop *b, double now) {
+  bridge_place pl;
+  if (nd_mailbox_take(&b->place, &b->pl_version, &pl, sizeof(pl)) == (int)sizeof(pl))
+    b->pl = pl, b->pl_pending = 1;
+  if (!b->pl_pending) return 0;
+  const double *p = b->pl.pose;
+  const double gap = nds_world_place(b->world, p[0], p[1], p[2], b->pl.clear);
+  const int placed = gap >= b->pl.clear;
+  if (!placed && now - b->pl.arrival < BRIDGE_PLACE_WAIT) return 0;
+  b->pl_pending = 0;
+  if (placed) b->rep.places++;
+  else b->rep.places_dropped++;
+  b->rep.place_id = b->pl.id;
+  memcpy(b->rep.place_pose, p, sizeof(b->rep.place_pose));
+  b->rep.place_gap = gap;
+  return 1;
+}
+
 void bridge_loop_step(bridge_loop *b, double now, int64_t utime) {
   double sp[2][4];
-  int post = setpoint(b, now, utime, sp);
+  int post = place(b, now);
+  post |= setpoint(b, now, utime, sp);
   const uint64_t req = atomic_load_explicit(&b->resume_req, memory_order_relaxed);
   if (req != b->resume_seen) {  /* a new task: a stopped arm tracks again */
     b->resume_seen = req;

@@ -1,6 +1,7 @@
 /* bridge_loop: one step of nudge-bridge's 1 kHz loop, without the clock.
  *
- * Take the newest EE_CMD from its mailbox and track the trajectory it commits to, sampled at
+ * Place the object where a PLACE asks, once the sphere is clear of the pose;
+ * take the newest EE_CMD from its mailbox and track the trajectory it commits to, sampled at
  * the step's time (joined, when it left the one a step followed), until it is stale; then
  * hold where the sphere is, as before the first;
  * step the world (sim/nds_world.h);
@@ -56,6 +57,18 @@ typedef struct {
 #define BRIDGE_JOIN_S 0.03
 #define BRIDGE_JOIN_MAX 0.005
 
+/* A validated PLACE (a new place_id), stamped with its local arrival. */
+typedef struct {
+  int64_t id;
+  double pose[3];      /* x, y, yaw */
+  double clear;        /* m */
+  double arrival;      /* monotonic s */
+} bridge_place;
+
+/* A PLACE waits until the sphere is its clear from the pose (the planner moves it there
+ * while idle), at most BRIDGE_PLACE_WAIT s; then it is dropped and reported. */
+#define BRIDGE_PLACE_WAIT 10.0
+
 /* How a step's setpoint was sampled, for telling what a reflex stop followed. */
 typedef enum {
   BRIDGE_SAMPLE_HOLD = 0,    /* holding */
@@ -76,6 +89,9 @@ typedef struct {
  * change. Counters only grow. */
 typedef struct {
   int64_t steps, resets, hold_events, apart_events, silent_events, stops, joins;
+  int64_t places, places_dropped;
+  int64_t place_id;     /* the newest placed or dropped PLACE */
+  double place_pose[3], place_gap; /* its pose and the sphere's gap to it, m */
   int64_t robot_states, frames, arm_states;
   double hold_pos[2];  /* the setpoint while holding */
   int32_t holding, have_cmd, stopped;
@@ -94,6 +110,7 @@ typedef struct {
   nds_world *world;
   double cmd_timeout;  /* s: a command older than this is stale */
   nd_mailbox cmd;      /* I/O -> loop */
+  nd_mailbox place;    /* I/O -> loop: the newest PLACE */
   nd_mailbox report;   /* loop -> I/O */
   nd_ring out;         /* loop -> I/O: encoded ROBOT_STATE / MOCAP / ARM_STATE */
   atomic_uint_fast64_t resume_req;  /* I/O -> loop: +1 per new task (a stopped arm resumes) */
@@ -102,6 +119,9 @@ typedef struct {
                           * reached (the one before it, unless it is ahead of the steps) */
   int have_prev;
   bridge_cmd src;      /* the command the last step sampled */
+  bridge_place pl;     /* the PLACE waiting for the sphere to clear its pose (pl_pending) */
+  int pl_pending;
+  uint64_t pl_version;
   nd_snap_seg join;    /* the offset being joined, from join_utime on (joining) */
   int64_t join_utime;
   int joining;

@@ -110,14 +110,14 @@ int main(int argc, char **argv) {
   fprintf(stderr,
           PROG ": stopped after %.2f s: %lld steps (%.1f /s), %lld ROBOT_STATE, %lld MOCAP, "
                "%lld ARM_STATE, %lld reflex stops, %lld EE_CMD silences over %g ms followed, %lld "
-               "commands after a followed future joined, %lld holds "
+               "commands after a followed future joined, %lld placements (%lld dropped), %lld holds "
                "for EE_CMD stamps apart, inputs %lld received %lld refused (%lld "
                "EE_CMD outside the workspace), period error p50 %d p99 %d max %d us, overruns "
                "%lld, dropped steps %lld, resets %lld, ring drops %llu\n",
           up, (long long)r->steps, r->steps / up, (long long)r->robot_states,
           (long long)r->frames, (long long)r->arm_states, (long long)r->stops,
           (long long)r->silent_events, 1e3 * BRIDGE_CMD_HORIZON, (long long)r->joins,
-          (long long)r->apart_events,
+          (long long)r->places, (long long)r->places_dropped, (long long)r->apart_events,
           (long long)io.st.received, (long long)io.st.rejected,
           (long long)io.refused_ws.count, ls.p50_us, ls.p99_us, ls.max_us,
           (long long)ls.overruns, (long long)ls.skipped, (long long)r->resets,

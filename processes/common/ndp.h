@@ -20,6 +20,7 @@
 #define NDP_CH_EPISODE "EPISODE"
 #define NDP_CH_STATUS "STATUS"
 #define NDP_CH_ARM_STATE "ARM_STATE"
+#define NDP_CH_PLACE "PLACE"
 
 /* Where nothing leaves the host: ttl=0 multicast on the default LCM group. */
 #define NDP_DEFAULT_URL "udpm://239.255.76.67:7667?ttl=0"

@@ -150,6 +150,22 @@ int ndp_check_task(const nudge_task_t *m, char *why, int len) {
   return 0;
 }
 
+int ndp_check_place(const nudge_place_t *m, char *why, int len) {
+  const double g[3] = {m->x, m->y, m->yaw};
+  if (utime_ok(m->utime, why, len) || vec_ok(g, 2, NDP_MAX_POS, "pose", why, len) ||
+      vec_ok(g + 2, 1, 100.0, "yaw", why, len))
+    return -1;
+  if (!isfinite(m->clear) || m->clear < 0.0 || m->clear > NDP_MAX_PLACE_CLEAR) {
+    snprintf(why, len, "clear = %g is outside [0, %g] m", m->clear, NDP_MAX_PLACE_CLEAR);
+    return -1;
+  }
+  if (m->place_id < 0) {
+    snprintf(why, len, "place_id = %lld is negative", (long long)m->place_id);
+    return -1;
+  }
+  return 0;
+}
+
 int ndp_check_params(const nudge_params_t *m, char *why, int len) {
   char th[200];
   if (utime_ok(m->utime, why, len)) return -1;

@@ -10,6 +10,7 @@
 #include "nudge/nudge_episode_t.h"
 #include "nudge/nudge_mocap_t.h"
 #include "nudge/nudge_params_t.h"
+#include "nudge/nudge_place_t.h"
 #include "nudge/nudge_plan_t.h"
 #include "nudge/nudge_robot_state_t.h"
 #include "nudge/nudge_status_t.h"
@@ -37,6 +38,9 @@ int ndp_check_task(const nudge_task_t *m, char *why, int len);
 int ndp_check_params(const nudge_params_t *m, char *why, int len);
 int ndp_check_arm_state(const nudge_arm_state_t *m, char *why, int len);
 int ndp_check_episode(const nudge_episode_t *m, char *why, int len);
+/* clear within [0, NDP_MAX_PLACE_CLEAR] m. */
+int ndp_check_place(const nudge_place_t *m, char *why, int len);
+#define NDP_MAX_PLACE_CLEAR 0.1
 
 /* Decode EPISODE / STATUS bytes (the types with strings) without trusting them: the
  * decoders lcm-gen 1.3.1 generates take a string's length word as given, so a negative

@@ -62,6 +62,16 @@ void planner_task_summary(planner_proc *p, const char *how) {
           (long long)(p->overflows - p->task_overflows0));
 }
 
+/* A new PLACE: the sphere is kept clear of the pose until the object is seen there. */
+static void use_place(void *user, const nudge_place_t *m) {
+  planner_proc *p = user;
+  p->st.received++;
+  if (m->place_id == p->place.place_id) return;  /* re-sent until the object is there */
+  p->place = *m;
+  p->place_due = p->place_pending = 1;
+  p->place_at = ndp_mono();
+}
+
 static void use_task(void *user, const nudge_task_t *m) {
   planner_proc *p = user;
   p->st.received++;
@@ -139,6 +149,7 @@ NDP_INPUT(nudge_robot_state_t, ndp_check_robot_state, on_robot_state_raw, use_ro
 NDP_INPUT(nudge_ee_cmd_t, ndp_check_ee_cmd, on_ee_cmd_raw, use_ee_cmd, refuse)
 NDP_INPUT(nudge_task_t, ndp_check_task, on_task_raw, use_task, refuse)
 NDP_INPUT(nudge_params_t, ndp_check_params, on_params_raw, use_params, refuse)
+NDP_INPUT(nudge_place_t, ndp_check_place, on_place_raw, use_place, refuse)
 
 /* ---------------------------------------------------------------------------------- */
 
@@ -155,6 +166,7 @@ int planner_subscribe(planner_proc *p, char *err, int errlen) {
   lcm_subscription_t *s_cmd = lcm_subscribe(p->lcm, NDP_CH_EE_CMD, on_ee_cmd_raw, p);
   if (!s_mocap || !s_rs || !s_cmd || !lcm_subscribe(p->lcm, NDP_CH_TASK, on_task_raw, p) ||
       !lcm_subscribe(p->lcm, NDP_CH_PARAMS, on_params_raw, p) ||
+      !lcm_subscribe(p->lcm, NDP_CH_PLACE, on_place_raw, p) ||
       !lcm_subscribe(p->lcm, NDP_CH_EPISODE, on_episode, p) ||
       lcm_subscription_set_queue_capacity(s_mocap, p->in_mocap.cap) ||
       lcm_subscription_set_queue_capacity(s_rs, p->in_rs.cap) ||

@@ -108,6 +108,7 @@ int main(int argc, char **argv) {
   static planner_proc p;
   p.o = &o;
   p.theta_version = -1;
+  p.place.place_id = -1;
   ndp_status_init(&p.st, PROG);
   p.st.state = "idle";
 
@@ -172,8 +173,9 @@ int main(int argc, char **argv) {
     now = ndp_mono();
     if (!p.active) {
       p.st.state = "idle";
-      if (p.release_due ? planner_release(&p, now, err, sizeof(err))
-                        : planner_keep_clear(&p, now, err, sizeof(err)))
+      if (p.place_due     ? planner_place(&p, now, err, sizeof(err))
+          : p.release_due ? planner_release(&p, now, err, sizeof(err))
+                          : planner_keep_clear(&p, now, err, sizeof(err)))
         goto done;
     } else if (!planner_state_fresh(&p, now)) {
       p.st.state = "stale";

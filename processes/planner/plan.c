@@ -158,19 +158,39 @@ static int release_sensed(const planner_proc *p, double now) {
          ndp_input_fresh(&p->in_rs, now, p->o->state_timeout);
 }
 
-/* The object as nd_release sees it: its newest MOCAP pose and the model's sides. */
-static nd_release_box release_box(const planner_proc *p) {
+/* 1 while a PLACE's object is not yet seen at its pose (PLANNER_PLACE_*). */
+static int placing(planner_proc *p, double now) {
+  if (!p->place_pending) return 0;
+  const double dx = p->mocap.obj_pos[0] - p->place.x, dy = p->mocap.obj_pos[1] - p->place.y;
+  if (now - p->place_at > PLANNER_PLACE_WAIT ||
+      (p->mocap.utime > p->place.utime && hypot(dx, dy) < PLANNER_PLACE_AT))
+    p->place_pending = 0;
+  return p->place_pending;
+}
+
+/* The object as nd_release sees it: its newest MOCAP pose and the model's sides, or the
+ * pose a PLACE puts it at until it is seen there. */
+static nd_release_box release_box(planner_proc *p, double now) {
+  if (placing(p, now))
+    return (nd_release_box){.x = p->place.x, .y = p->place.y, .yaw = p->place.yaw,
+                            .half = {p->obj_half[0], p->obj_half[1]}};
   return (nd_release_box){.x = p->mocap.obj_pos[0], .y = p->mocap.obj_pos[1],
                           .yaw = nd_quat_yaw(p->mocap.obj_quat),
                           .half = {p->obj_half[0], p->obj_half[1]}};
 }
 
-/* The rest point key[2] --release clear of b from the sphere's measured position, in the
+/* How clear of the object the sphere rests (m): --release, and beyond a PLACE's clear. */
+static double release_clear(planner_proc *p, double now) {
+  const double c = p->o->release;
+  return placing(p, now) ? fmax(c, p->place.clear + PLANNER_PLACE_EXTRA) : c;
+}
+
+/* The rest point key[2] release_clear of b from the sphere's measured position, in the
  * keypoint box; return how far it moves the sphere (m). */
-static double release_key(const planner_proc *p, const nd_release_box *b, double key[2]) {
+static double release_key(planner_proc *p, double now, const nd_release_box *b, double key[2]) {
   const nds_planner_cfg *pc = nds_planner_config(p->planner);
-  return nd_release_target(b, p->ee_radius, p->o->release, p->rs.ee_pos, pc->ws_lo, pc->ws_hi,
-                           key);
+  return nd_release_target(b, p->ee_radius, release_clear(p, now), p->rs.ee_pos, pc->ws_lo,
+                           pc->ws_hi, key);
 }
 
 /* Publish the PLAN that rests the sphere at key[2] (the object b predicted to stay); renew:
@@ -206,9 +226,9 @@ int planner_release(planner_proc *p, double now, char *err, int errlen) {
   const planner_opts *o = p->o;
   if (!release_sensed(p, now)) return 0;
   p->release_due = 0;
-  const nd_release_box b = release_box(p);
+  const nd_release_box b = release_box(p, now);
   double key[2];
-  const double moved = release_key(p, &b, key);
+  const double moved = release_key(p, now, &b, key);
   if (publish_release(p, now, &b, key, 0, err, errlen)) return -1;
   p->keep_clear = o->release > 0.0;
   fprintf(stderr, PROG ": task %lld: released: the sphere rests at (%+.3f, %+.3f) m, %.1f mm "
@@ -218,20 +238,19 @@ int planner_release(planner_proc *p, double now, char *err, int errlen) {
 }
 
 int planner_keep_clear(planner_proc *p, double now, char *err, int errlen) {
-  const planner_opts *o = p->o;
   if (now < p->release_until) {
     if (now - p->released_at < PLANNER_RELEASE_RENEW || !release_sensed(p, now)) return 0;
-    const nd_release_box b = release_box(p);
+    const nd_release_box b = release_box(p, now);
     return publish_release(p, now, &b, p->release_key, 1, err, errlen);
   }
   if (!p->keep_clear || now - p->released_at < PLANNER_RECLEAR_WAIT || !release_sensed(p, now))
     return 0;
-  const nd_release_box b = release_box(p);
+  const nd_release_box b = release_box(p, now);
   double n[2];
   const double gap = nd_release_gap(&b, p->ee_radius, p->rs.ee_pos, n);
-  if (gap >= PLANNER_RECLEAR * o->release) return 0;
+  if (gap >= PLANNER_RECLEAR * release_clear(p, now)) return 0;
   double key[2];
-  const double moved = release_key(p, &b, key);
+  const double moved = release_key(p, now, &b, key);
   if (moved < PLANNER_RECLEAR_MIN) {
     p->keep_clear = 0;
     fprintf(stderr, PROG ": task %lld: the object is %.1f mm from the sphere, which the keypoint "
@@ -243,5 +262,20 @@ int planner_keep_clear(planner_proc *p, double now, char *err, int errlen) {
   fprintf(stderr, PROG ": task %lld: the object came within %.1f mm of the sphere after the "
           "release: sent clear again, to (%+.3f, %+.3f) m, %.1f mm out\n",
           (long long)p->task.task_id, 1e3 * gap, key[0], key[1], 1e3 * moved);
+  return 0;
+}
+
+int planner_place(planner_proc *p, double now, char *err, int errlen) {
+  if (!release_sensed(p, now)) return 0;
+  p->place_due = 0;
+  const nd_release_box b = release_box(p, now);
+  double key[2];
+  const double moved = release_key(p, now, &b, key);
+  if (moved > 0.0 && publish_release(p, now, &b, key, 0, err, errlen)) return -1;
+  p->keep_clear = 1;
+  fprintf(stderr, PROG ": PLACE %lld at (%+.3f, %+.3f) m: the sphere %s (%+.3f, %+.3f) m, %.1f "
+          "mm out, at least %g m clear of it\n", (long long)p->place.place_id, b.x, b.y,
+          moved > 0.0 ? "rests at" : "stays at", key[0], key[1], 1e3 * moved,
+          release_clear(p, now));
   return 0;
 }

@@ -8,7 +8,8 @@
  * (end-effector), the executor's setpoint from EE_CMD, the goal from TASK and theta from
  * PARAMS. While a task is active and the state is fresh it plans back to back; when the
  * task ends, one release plan takes the sphere clear of the object, and while idle the
- * planner sends it clear again if the object, still sliding, comes back near. Planning
+ * planner sends it clear again if the object, still sliding, comes back near; a PLACE
+ * (the object to be put at a pose) sends it clear of that pose. Planning
  * runs in the main thread between LCM drains: it is not a 1 kHz process, and the queues
  * are sized so a plan's duration of input fits in them. */
 #ifndef PLANNER_H
@@ -60,6 +61,14 @@ typedef struct {
 #define PLANNER_RECLEAR_WAIT 0.25
 #define PLANNER_RECLEAR_MIN 1e-3
 
+/* A PLACE (an operator resets the object) needs the sphere clear of the new pose: while
+ * idle, the release and keep-clear go by that pose, PLANNER_PLACE_EXTRA beyond the
+ * PLACE's clear (tracking error), until MOCAP shows the object within PLANNER_PLACE_AT of
+ * it, or for PLANNER_PLACE_WAIT s (the bridge's wait). */
+#define PLANNER_PLACE_EXTRA 0.003
+#define PLANNER_PLACE_AT 0.005
+#define PLANNER_PLACE_WAIT 10.0
+
 /* Niceness the planning threads add to the process's: below its LCM receive thread. */
 #define PLANNER_COMPUTE_NICE 5
 
@@ -100,6 +109,10 @@ typedef struct {
   double release_until;        /* when its segment ends, s (ndp_mono) */
   double release_key[2];       /* where it rests the sphere */
   double obj_half[2], ee_radius; /* the model's object half sides and sphere radius, m */
+  nudge_place_t place;         /* the newest PLACE (place_id -1: none) */
+  int place_due;               /* a new PLACE: send the sphere clear of its pose */
+  int place_pending;           /* the object is not yet seen at its pose */
+  double place_at;             /* when it came, s (ndp_mono) */
 
   double plan_s;               /* recent plan time, s (moving average) */
   double pre_sp[PLANNER_PRE_MAX][2][4]; /* the prefix's setpoints, one per model step */
@@ -135,6 +148,11 @@ int planner_plan_once(planner_proc *p, double now, char *err, int errlen);
  * PLAN of one keypoint at rest clear of the object (iterations 0; nd_release). Return 0,
  * or -1 with a message (LCM). */
 int planner_release(planner_proc *p, double now, char *err, int errlen);
+
+/* While idle after a new PLACE, once MOCAP and ROBOT_STATE are fresh: publish a release
+ * that rests the sphere clear of the PLACE's pose, if it is not already. Return 0, or -1
+ * with a message (LCM). */
+int planner_place(planner_proc *p, double now, char *err, int errlen);
 
 /* While idle after a release: re-send it until its segment ends (PLANNER_RELEASE_RENEW);
  * then, if the object has come closer to the sphere than PLANNER_RECLEAR x --release,

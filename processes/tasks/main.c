@@ -58,6 +58,17 @@ int main(int argc, char **argv) {
   const int64_t id0 = ndp_utime() / 1000;
   for (int i = 0; i < cfg.n && !ndp_quit; i++) {
     tasks_result r;
+    if (cfg.place) {
+      const int pl = tasks_place(lcm, &io, &cfg, id0 + i, err, sizeof(err));
+      if (pl < 0) goto done;
+      if (pl == 0 && !ndp_quit) {
+        snprintf(err, sizeof(err), "--place: the object was not at (%g, %g) m, yaw %g rad "
+                 "within %g s of asking on %s (nudge-bridge puts it there once the sphere is %g "
+                 "m clear; on a robot, put it there by hand)", cfg.place_pose.x,
+                 cfg.place_pose.y, cfg.place_pose.yaw, cfg.place_wait, NDP_CH_PLACE, PLACE_CLEAR);
+        goto done;
+      }
+    }
     if (tasks_settle(lcm, &io, &cfg, err, sizeof(err))) goto done;
     if (ndp_quit) break;
     if (tasks_run(lcm, &io, &cfg, &cfg.goals[i], id0 + i, &r, err, sizeof(err))) goto done;

@@ -48,6 +48,23 @@ static int add_goal(const char *v, const char *what, void *dst, char *err, int e
   return 0;
 }
 
+static int set_place(const char *v, const char *what, void *dst, char *err, int errlen) {
+  tasks_cfg *c = dst;
+  char why[400];
+  int commas = 0;
+  for (const char *q = v; *q; q++) commas += *q == ',';
+  if (commas != 2) {
+    snprintf(err, errlen, "%s: expected X,Y,YAW, got '%s'", what, v);
+    return -1;
+  }
+  if (nd_goal_parse_arg(v, &c->place_pose, why, sizeof(why))) {
+    snprintf(err, errlen, "%s: %s", what, why);
+    return -1;
+  }
+  c->place = 1;
+  return 0;
+}
+
 static int add_goals(const char *v, const char *what, void *dst, char *err, int errlen) {
   tasks_cfg *c = dst;
   const int n0 = c->n;
@@ -65,6 +82,7 @@ static int add_goals(const char *v, const char *what, void *dst, char *err, int 
 
 int tasks_options(int argc, char **argv, tasks_cfg *c) {
   *c = (tasks_cfg){.eps = 1e-2, .tau = 5.0, .workspace = 0.5, .wait = 10.0, .settle = 0.5,
+                    .place_wait = 15.0,
                     .record_dt = 0.001, .record_join = ND_REC_JOIN_CUBIC};
   memcpy(c->theta, nd_theta_true, sizeof(c->theta));
   int world = 0;
@@ -117,6 +135,14 @@ int tasks_options(int argc, char **argv, tasks_cfg *c) {
        .help = "with --record: after appending a task, wait up to S s for PARAMS fitted on it "
                "before going on (the paper's protocol: refit between episodes), after the last "
                "task too; 0: no wait"},
+      {"place", ND_OPT_CUSTOM, c, .parse = set_place, .arg = "X,Y,YAW", .def = "",
+       .help = "before each task, ask on PLACE for the object at this pose and wait until "
+               "MOCAP shows it there (nudge-bridge puts it there once the planner has moved "
+               "the sphere clear; on a robot, a person does): every task starts from the same "
+               "pose, as the paper's evaluation tasks do"},
+      {"place-wait", ND_OPT_DOUBLE, &c->place_wait, 0.1, 3600.0, .arg = "S",
+       .help = "with --place: how long to wait for the object at the pose before giving up "
+               "(status 1)"},
       {"lcm-url", ND_OPT_STRING, &c->url, .arg = "URL", .def = "$LCM_DEFAULT_URL, else " NDP_DEFAULT_URL,
        .help = "LCM URL"},
   };
@@ -124,8 +150,8 @@ int tasks_options(int argc, char **argv, tasks_cfg *c) {
       PROG, "[options]",
       "Run pushing tasks one after another: publish each goal on TASK, follow the object on "
       "MOCAP until the task error L_pos + l1 L_rot falls below eps (reached) or the time limit "
-      "passes (timed out), report it on EPISODE and as a line on stdout. The object is not "
-      "reset between tasks: each starts where the last one ended.",
+      "passes (timed out), report it on EPISODE and as a line on stdout. Without --place the "
+      "object is not reset between tasks: each starts where the last one ended.",
       "Prints one line per task, summary figures as 'name value unit' lines, and ends with\n"
       "'reached K/N goals'. Exit status: 0 every task ran (reached, timed out or rejected),\n"
       "1 the tasks could not be run (no MOCAP, LCM failure), 2 bad arguments, 3 every\n"
@@ -137,6 +163,8 @@ int tasks_options(int argc, char **argv, tasks_cfg *c) {
   if (pa != ND_OPT_RUN) return pa;
   if (c->await_fit > 0 && !c->record)
     return nd_opt_fail(&spec, "--await-fit needs --record (it waits for the fit of a record)");
+  if (nd_opt_find(&spec, "place-wait")->given && !c->place)
+    return nd_opt_fail(&spec, "--place-wait needs --place");
   if (world == 1 && !nd_opt_find(&spec, "tau")->given) c->tau = 8.0;
   if (world == 1 && !nd_opt_find(&spec, "record-frames")->given)
     c->record_join = ND_REC_JOIN_LINE;

@@ -240,6 +240,39 @@ static double frame_speed(const nudge_mocap_t *a, const nudge_mocap_t *b) {
   return fmax(d, REST_ARM * dyaw) / dt;
 }
 
+int tasks_place(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, int64_t id, char *err, int errlen) {
+  io->st.state = "placing";
+  const nd_goal *g = &c->place_pose;
+  const nudge_place_t m = {ndp_utime(), id, g->x, g->y, g->yaw, PLACE_CLEAR};
+  const double t0 = ndp_mono();
+  double sent = -INFINITY;
+  int said = 0;
+  while (!ndp_quit) {
+    const double now = ndp_mono();
+    const nudge_mocap_t *f = &io->last;
+    if (io->frames > 0 && f->utime > m.utime &&
+        hypot(f->obj_pos[0] - g->x, f->obj_pos[1] - g->y) < PLACE_POS &&
+        yaw_error(nd_quat_yaw(f->obj_quat), g->yaw) < PLACE_YAW)
+      return 1;
+    if (now - t0 >= c->place_wait) return 0;
+    if (!said && now - t0 >= PLACE_SAY) {
+      fprintf(stderr, PROG ": waiting for the object at (%g, %g) m, yaw %g rad (PLACE)\n", g->x,
+              g->y, g->yaw);
+      said = 1;
+    }
+    if (now - sent >= PLACE_RESEND) {
+      if (nudge_place_t_publish(lcm, NDP_CH_PLACE, &m) != 0) {
+        snprintf(err, errlen, "publishing on %s failed", NDP_CH_PLACE);
+        return -1;
+      }
+      io->st.published++;
+      sent = now;
+    }
+    if (tasks_pump(lcm, io, 0.02, err, errlen)) return -1;
+  }
+  return 0;
+}
+
 int tasks_settle(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int errlen) {
   io->st.state = "settling";
   io->no_record = 0;

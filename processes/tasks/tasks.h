@@ -9,8 +9,9 @@
  *
  * The runner publishes one pushing task at a time, watches the object on MOCAP, ends the
  * task on the terminal condition (L_pos + w_rot L_rot < eps, or the time limit) and reports
- * it on EPISODE and as one line on stdout. The object is not reset between tasks (a real
- * robot cannot do that): each goal starts where the previous task left the object. Times
+ * it on EPISODE and as one line on stdout. The object is not reset between tasks unless
+ * --place asks for it at one pose before each (PLACE: an emulating bridge puts it there, on
+ * a robot a person does); else each goal starts where the previous task left the object. Times
  * are measured on this host's monotonic clock, from the TASK publication to the arrival of
  * the MOCAP frame that met the condition.
  *
@@ -41,6 +42,14 @@
 #define REST_SPAN 0.1    /* s */
 #define REST_ARM 0.05    /* m: about the object's half length */
 #define SETTLE_MAX 5.0   /* s */
+/* --place: the PLACE is re-sent every PLACE_RESEND s until a MOCAP frame captured after it
+ * shows the object within PLACE_POS and PLACE_YAW of the pose, at most --place-wait s. The
+ * sphere must keep PLACE_CLEAR from the placed object's sides (the planner's release). */
+#define PLACE_RESEND 0.25  /* s */
+#define PLACE_POS 0.005    /* m */
+#define PLACE_YAW 0.05     /* rad */
+#define PLACE_CLEAR 0.01   /* m */
+#define PLACE_SAY 3.0      /* s: a placement not seen by then is announced (for a person) */
 
 /* What the runner was asked to do; constant once parsed. */
 typedef struct {
@@ -56,6 +65,9 @@ typedef struct {
   int record_join;               /* ND_REC_JOIN_*: how the object's frames are joined */
   double theta[ND_NTHETA];       /* recorded as the planner's theta until PARAMS arrives */
   double await_fit;              /* s to wait for the adapter's refit after a record; 0 none */
+  int place;                     /* 1: put the object at place_pose before each task */
+  nd_goal place_pose;
+  double place_wait;             /* s */
   nd_goal goals[MAX_GOALS];
   int n;
 } tasks_cfg;
@@ -150,6 +162,10 @@ void tasks_print(int i, int n, const nd_goal *g, const tasks_result *r);
 const char *tasks_reflex_name(int reflex, int joint);
 /* After a task: await the fit of its record (--await-fit). */
 int tasks_pause(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int errlen);
+/* Before a task, with c->place: ask for the object at c->place_pose (PLACE, id) and wait
+ * until MOCAP shows it there. 1 if it is, 0 if not within c->place_wait (or interrupted),
+ * -1 with a message on an LCM failure. */
+int tasks_place(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, int64_t id, char *err, int errlen);
 /* Before a task: wait c->settle s, then until the object is at rest (at most SETTLE_MAX);
  * if it is not, say so and set io->no_record. 0, or -1 with a message on an LCM failure. */
 int tasks_settle(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int errlen);

@@ -216,6 +216,9 @@ bad nudge-tasks "--goal|'1,2'|expected X,Y,YAW" --goal 1,2
 bad nudge-tasks "--goal|'1,2,3,4,5,6'" --goal 1,2,3,4,5,6
 bad nudge-tasks "--goal|'0.1,0,0,0'|eps" --goal 0.1,0,0,0
 bad nudge-tasks "--await-fit needs --record" --await-fit 5
+bad nudge-tasks "--place|expected X,Y,YAW|'0,0'" --place 0,0
+bad nudge-tasks "--place|'0,nan,0'|y: 'nan' is not a finite number" --place 0,nan,0
+bad nudge-tasks "--place-wait needs --place" --place-wait 5
 
 bad nudge-status "--pid needs --wait NAME" --pid 5
 

@@ -81,6 +81,13 @@ static void fz_valid_task(const nudge_task_t *m) {
            "accepted task out of bounds");
 }
 
+static void fz_valid_place(const nudge_place_t *m) {
+  const double g[2] = {m->x, m->y};
+  FZ_CHECK(m->utime > 0 && m->place_id >= 0 && fz_bounded(g, 2, NDP_MAX_POS) &&
+           fz_bounded(&m->yaw, 1, 100.0) && isfinite(m->clear) && m->clear >= 0.0 &&
+           m->clear <= NDP_MAX_PLACE_CLEAR, "accepted place out of bounds");
+}
+
 static void fz_valid_params(const nudge_params_t *m) {
   FZ_CHECK(m->utime > 0 && m->version >= 0 && m->buffer_size >= 0, "accepted params header");
   for (int i = 0; i < 4; i++)
@@ -130,6 +137,7 @@ FZ_FIXED(plan)
 FZ_FIXED(task)
 FZ_FIXED(params)
 FZ_FIXED(arm_state)
+FZ_FIXED(place)
 
 /* ---- the types with strings ---- */
 
@@ -213,6 +221,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
   fz_task(data, len);
   fz_params(data, len);
   fz_arm_state(data, len);
+  fz_place(data, len);
   fz_episode(data, len);
   fz_status(data, len);
   fz_history(data, size);

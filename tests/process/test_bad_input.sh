@@ -8,7 +8,7 @@
 # a third that cannot be reached (tiny eps) to stay alive through every burst, recording
 # them (--record, into a file of its own: the recorder reads ROBOT_STATE, EE_CMD and PARAMS
 # too), nudge-inject sends on one channel at a time (MOCAP, ROBOT_STATE, EE_CMD, PARAMS,
-# PLAN, TASK, EPISODE, then STATUS with nudge-status listening; heartbeats whose name
+# PLAN, TASK, EPISODE, PLACE, then STATUS with nudge-status listening; heartbeats whose name
 # carries terminal escapes or is over-long must not reach its output): 'bad' messages that
 # decode but carry NaN, inf or out-of-range values, and garbage that does not decode. For
 # each channel, every process subscribed to it must count each message of both kinds in
@@ -38,8 +38,9 @@ declare -A READERS=(
   [TASK]="nudge-planner"
   [PARAMS]="nudge-planner nudge-tasks"
   [EPISODE]="nudge-planner"
+  [PLACE]="nudge-bridge nudge-planner"
 )
-CHANNELS=(MOCAP ROBOT_STATE EE_CMD PARAMS PLAN TASK EPISODE)
+CHANNELS=(MOCAP ROBOT_STATE EE_CMD PARAMS PLAN TASK EPISODE PLACE)
 
 pt_logger "$LOG"
 pt_spawn up "$PT_BIN/nudge-up" run --log-dir "$RUN" 2>"$PT_WORK/up.err"

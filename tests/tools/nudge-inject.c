@@ -34,15 +34,16 @@
 #include "nudge/nudge_robot_state_t.h"
 #include "nudge/nudge_status_t.h"
 #include "nudge/nudge_task_t.h"
+#include "nudge/nudge_place_t.h"
 
 #define PROG "nudge-inject"
 #define MAX_MSG 4096
 
 /* The channels with a receiver in the process system, and STATUS (nudge-status reads it). */
 enum { CH_MOCAP, CH_ROBOT_STATE, CH_EE_CMD, CH_PLAN, CH_TASK, CH_PARAMS, CH_EPISODE,
-       CH_STATUS, CH_COUNT };
+       CH_STATUS, CH_PLACE, CH_COUNT };
 static const char *const ch_name[CH_COUNT] = {"MOCAP", "ROBOT_STATE", "EE_CMD", "PLAN", "TASK",
-                                              "PARAMS", "EPISODE", "STATUS"};
+                                              "PARAMS", "EPISODE", "STATUS", "PLACE"};
 
 /* Settings; constant once parsed. */
 typedef struct {
@@ -353,6 +354,31 @@ static void inject_task(inj *j) {
   }
 }
 
+static void inject_place(inj *j) {
+  /* Template: the start pose; only ever sent with one field broken. */
+  const nudge_place_t ok = {wall_us(), 1000000, 0.0, 0.0, 0.0, 0.01};
+  nudge_place_t m;
+#define PLACE_BAD(stmt)                                                 \
+  do {                                                                  \
+    m = ok;                                                             \
+    stmt;                                                               \
+    send_enc(j, nudge_place_t_encode(j->buf, 0, MAX_MSG, &m));          \
+  } while (0)
+  PLACE_BAD(m.x = NAN);
+  PLACE_BAD(m.y = 1e6);
+  PLACE_BAD(m.yaw = INFINITY);
+  PLACE_BAD(m.clear = -0.01);
+  PLACE_BAD(m.clear = NAN);
+  PLACE_BAD(m.clear = 5.0);
+  PLACE_BAD(m.place_id = -2);
+  PLACE_BAD(m.utime = 0);
+#undef PLACE_BAD
+  if (j->o->garbage) {
+    m = ok;
+    send_garbage(j, j->buf, nudge_place_t_encode(j->buf, 0, MAX_MSG, &m));
+  }
+}
+
 static void inject_params(inj *j) {
   const nudge_params_t ok = {wall_us(), 1000000, {1, 0.005, 1e-4, 1}, {0, 0, 0, 0},
                              15, 0.0, 1};
@@ -447,7 +473,8 @@ static void usage(FILE *f) {
           "carry NaN, inf or out-of-range values (receivers must refuse and count each);\n"
           "'garbage' does not decode (random bytes, truncated encodings, the wrong type,\n"
           "lying string lengths). Nothing sent is valid.\n\n"
-          "  --channel CH    one of MOCAP ROBOT_STATE EE_CMD PLAN TASK PARAMS EPISODE STATUS;\n"
+          "  --channel CH    one of MOCAP ROBOT_STATE EE_CMD PLAN TASK PARAMS EPISODE STATUS\n"
+          "                  PLACE;\n"
           "                  repeat for more (default: all but STATUS)\n"
           "  --kind K        bad, garbage or all (default all); or workspace: valid PLAN\n"
           "                  and EE_CMD outside the default workspace (at (0.8, 0))\n"
@@ -545,7 +572,7 @@ int main(int argc, char **argv) {
   }
   static void (*const fn[CH_COUNT])(inj *) = {inject_mocap, inject_robot_state, inject_ee_cmd,
                                               inject_plan,  inject_task,        inject_params,
-                                              inject_episode, inject_status};
+                                              inject_episode, inject_status, inject_place};
   for (int r = 0; r < o.repeat; r++)
     for (int c = 0; c < CH_COUNT; c++)
       if (o.on[c]) {

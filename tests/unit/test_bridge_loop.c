@@ -7,12 +7,14 @@
  * and an executor's commands: jittered ones are applied at the step's time and stop no
  * reflex, a jump does; through a silent commander or a stall of the whole machine the
  * robot's setpoint stays on the executor's trajectory and no reflex stops it, and a command
- * that arrives late after a plan switch is joined, not stepped to. */
+ * that arrives late after a plan switch is joined, not stepped to. A PLACE waits for the
+ * sphere to clear its pose, then puts the object there at rest, or is dropped. */
 #define _GNU_SOURCE
 #include "nd_test.h"
 #include "rt_count.h"
 
 #include "bridge_loop.h"
+#include "nd_math.h"
 #include "nd_rtloop.h"
 #include "nudge/nudge_mocap_t.h"
 #include "nudge/nudge_robot_state_t.h"
@@ -27,6 +29,7 @@ typedef struct {
   long states, frames, arm_states, seq_gaps, late_frames;
   int64_t last_seq, last_frame_us, last_state_us;
   double ee[2];
+  double obj[3];  /* the newest frame's object x, y, yaw */
   int mode;
 } drained;
 
@@ -50,6 +53,7 @@ static void drain(drained *d) {
       /* The ideal world's capture has no latency: a frame is stamped with its step's time. */
       d->late_frames += m.utime != d->last_state_us;
       d->last_frame_us = m.utime;
+      d->obj[0] = m.obj_pos[0], d->obj[1] = m.obj_pos[1], d->obj[2] = nd_quat_yaw(m.obj_quat);
       d->frames++;
     } else {
       assert_int_equal(tag, BRIDGE_TAG_ARM_STATE);
@@ -380,6 +384,11 @@ static void test_step_allocates_nothing(void **state) {
       y = 0.05 * (1 - cos(1e-3 * (double)k));
       post_cmd(now, x, y);
     }
+    /* A PLACE clear of the sphere's circle: placed inside the counted window. */
+    if (k >= 2000 && !g_b.pl_version) {
+      const bridge_place pl = {1, {0.10, 0.10, 0.3}, 0.01, now};
+      nd_mailbox_post(&g_b.place, &pl, sizeof pl);
+    }
     /* Every 997th wake-up comes 7.5 ms late: the loop catches up step by step. */
     const double late = k % 997 == 0 ? 7.5e-3 : 2e-5;
     const int64_t now_ns = next + (int64_t)(late * 1e9);
@@ -422,6 +431,63 @@ static void test_step_allocates_nothing(void **state) {
   assert_int_equal(g_b.rep.hold_events, 1);    /* and the hold when they went stale */
   assert_int_equal(g_b.rep.apart_events, 0);
   assert_int_equal(g_b.holding, 0);
+  assert_int_equal(g_b.rep.places, 1);
+  nds_world_free(w);
+}
+
+/* PLACE on the lab world. A pose the sphere sits in waits: the object stays. The executor
+ * takes the sphere 12 cm away; once its surface is the PLACE's clear from the pose's sides
+ * the object is put there, and the motion capture shows it there, at rest, within its
+ * noise; no reflex stops the arm. A PLACE whose pose the sphere keeps to is dropped after
+ * BRIDGE_PLACE_WAIT, the object left where it was. */
+static void test_lab_place(void **state) {
+  (void)state;
+  nds_world *w = lab_bridge();
+  drained d = {0};
+  const bridge_place first = {7, {-0.10, 0.02, 0.3}, 0.01, T0};
+  nd_mailbox_post(&g_b.place, &first, sizeof first);
+  int k = 0, placed_at = -1;
+  double obj0[3] = {0};
+  for (; k < 2500; k++) {
+    const double t = 1e-3 * k;
+    if (k == 500) exec_plan(t, (const double[4]){-0.10, -0.12, 0.0, 0.0}, 1.0);
+    const bridge_cmd c = exec_send(t);
+    nd_mailbox_post(&g_b.cmd, &c, sizeof c);
+    bridge_loop_step(&g_b, T0 + t, U0 + (int64_t)k * 1000);
+    drain(&d);
+    if (k == 450) memcpy(obj0, d.obj, sizeof obj0);
+    if (placed_at < 0 && g_b.rep.places) placed_at = k;
+  }
+  printf("place_after %.3f s (the move began at 0.5 s), gap %.4f m, object seen at (%.4f, "
+         "%.4f, %.3f)\n", 1e-3 * placed_at, g_b.rep.place_gap, d.obj[0], d.obj[1], d.obj[2]);
+  /* Waited while the sphere was in the way: the object at the start (origin) until then. */
+  assert_true(hypot(obj0[0], obj0[1]) < 1e-3);
+  assert_true(placed_at > 500 && placed_at < 1500);
+  assert_int_equal(g_b.rep.places, 1);
+  assert_int_equal(g_b.rep.place_id, 7);
+  assert_true(g_b.rep.place_gap >= 0.01 && g_b.rep.place_gap < 0.012);
+  assert_true(hypot(d.obj[0] + 0.10, d.obj[1] - 0.02) < 1e-3);
+  assert_near(d.obj[2], 0.3, 0.01);
+  assert_int_equal(g_b.rep.stops, 0);
+
+  /* The sphere rests at (-0.10, -0.12): a pose around it is never clear. */
+  const bridge_place blocked = {8, {-0.10, -0.12, 0.0}, 0.01, T0 + 1e-3 * k};
+  nd_mailbox_post(&g_b.place, &blocked, sizeof blocked);
+  for (int j = 0; j < 200; j++, k++) {
+    const bridge_cmd c = exec_send(1e-3 * k);
+    nd_mailbox_post(&g_b.cmd, &c, sizeof c);
+    /* The clock jumps past the wait at the 100th step. */
+    bridge_loop_step(&g_b, T0 + 1e-3 * k + (j >= 100 ? BRIDGE_PLACE_WAIT : 0.0),
+                     U0 + (int64_t)k * 1000);
+    drain(&d);
+    if (j == 99) assert_int_equal(g_b.rep.places_dropped, 0);
+  }
+  assert_int_equal(g_b.rep.places_dropped, 1);
+  assert_int_equal(g_b.rep.places, 1);
+  assert_int_equal(g_b.rep.place_id, 8);
+  assert_true(g_b.rep.place_gap < 0.0);
+  assert_true(hypot(d.obj[0] + 0.10, d.obj[1] - 0.02) < 1e-3);
+  assert_int_equal(g_b.rep.stops, 0);
   nds_world_free(w);
 }
 
@@ -432,6 +498,7 @@ int main(void) {
       cmocka_unit_test(test_lab_commander_silent),
       cmocka_unit_test(test_lab_machine_stall),
       cmocka_unit_test(test_lab_late_switch),
+      cmocka_unit_test(test_lab_place),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
