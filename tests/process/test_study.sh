@@ -76,11 +76,16 @@ pt_check "train.nrb holds the 2 training pushes (got $n_train)" test "$n_train" 
 met0=$(awk '$1 == "tasks_met_at_start" { print $2 }' "$OUT/run_0/eval_ep0.txt")
 pt_check "val.nrb holds the 5 held-out evaluation tasks but the ${met0:-?} met at the start (got $n_val)" \
   test -n "$met0" -a "$n_val" = $((5 - ${met0:-0}))
-# Each push starts where the one before left the object; its record assumes it at rest.
-# A sphere left pressing on it pushes it on (the controller's integral builds up): each
-# task ends with the planner's release, the sphere 1 cm clear of the object (half of it
-# is asked for here: the object may still slide after the release is planned).
+# Every task starts from the object placed at the origin (nudge-tasks --place): the bridge
+# puts it there once the planner has moved the sphere 1 cm clear, and its record assumes it
+# at rest. A sphere left pressing on it pushes it on (the controller's integral builds up):
+# each task ends with the planner's release, the sphere 1 cm clear of the object (half of
+# it is asked for here: the object may still slide after the release is planned).
 for b in train val; do
+  pt_val o0 buffer "$OUT/run_0/$b.nrb" record_start_off_origin_max
+  pt_val y0 buffer "$OUT/run_0/$b.nrb" record_start_yaw_abs_max
+  pt_check "$b.nrb: every record starts with the object placed at the origin (off by $o0 m, $y0 rad)" \
+    awk -v o="$o0" -v y="$y0" 'BEGIN { exit !(o != "" && o < 0.005 && y < 0.05) }'
   pt_val v0 buffer "$OUT/run_0/$b.nrb" record_start_speed_max
   pt_check "$b.nrb: every record starts with the object at rest (fastest $v0 m/s)" \
     awk -v v="$v0" 'BEGIN { exit !(v != "" && v < 0.01) }'
@@ -90,6 +95,12 @@ for b in train val; do
     awk -v g="$g0" 'BEGIN { exit !(g != "" && g > 0.005) }'
 done
 PLOG=$OUT/run_0/logs/planner.log
+BLOG=$OUT/run_0/logs/bridge.log
+n_tasks=$(cat "$OUT"/run_0/{train,eval}_ep*.txt | grep -c '^task [0-9]')
+n_placed=$(grep -c ': the object placed at (+0.000, +0.000) m, yaw +0.0 deg' "$BLOG")
+pt_check "the bridge placed the object before each of the $n_tasks tasks (placed $n_placed)" \
+  test "$n_tasks" -ge 17 -a "$n_placed" = "$n_tasks"
+pt_check_not "the bridge dropped no PLACE" grep -q 'dropped: the sphere stayed' "$BLOG"
 n_end=$(grep -cE ': task [0-9]+ (succeeded|timed out|ended in a reflex stop) after' "$PLOG")
 n_rel=$(grep -c ': released: ' "$PLOG")
 pt_check "the planner released the sphere after each of the $n_end tasks that ended (got $n_rel)" \

@@ -959,7 +959,7 @@ static int cmd_buffer(const lc_opts *o) {
     return 1;
   }
   int64_t undecodable = 0;
-  double start_speed_max = 0.0, start_gap_min = INFINITY;
+  double start_speed_max = 0.0, start_gap_min = INFINITY, start_off_max = 0.0, start_yaw_max = 0.0;
   nds_scene_cfg sc;
   nds_scene_cfg_default(&sc);
   nd_rfile_tail tail;
@@ -1001,6 +1001,9 @@ static int cmd_buffer(const lc_opts *o) {
     double n[2];
     const double gap = nd_release_gap(&box, sc.ee_radius, r.ee_pos, n);
     if (!(gap >= start_gap_min)) start_gap_min = gap;
+    /* Where the object starts: the origin, when every task places it there. */
+    start_off_max = fmax(start_off_max, hypot(r.obj_pos[0], r.obj_pos[1]));
+    start_yaw_max = fmax(start_yaw_max, fabs(nd_wrap_angle(box.yaw)));
     nd_rollout_free(&r);
   }
   const int corrupt = (int)undecodable + (tail.status == ND_RFILE_CORRUPT);
@@ -1016,6 +1019,8 @@ static int cmd_buffer(const lc_opts *o) {
   printf("records_duplicate %d count\n", dup);
   printf("record_start_speed_max %.4f m/s\n", start_speed_max);
   printf("record_start_gap_min %.4f m\n", nfound ? start_gap_min : 0.0);
+  printf("record_start_off_origin_max %.4f m\n", start_off_max);
+  printf("record_start_yaw_abs_max %.4f rad\n", start_yaw_max);
   if (o->committed) {
     int missing = 0, dup_c = 0, extra = 0;
     for (int i = 0; i < ncommitted; i++) {
