@@ -78,6 +78,7 @@ void nds_fit_cfg_default(nds_fit_cfg *cfg) {
   cfg->lower = 1e-7;
   for (int i = 0; i < ND_NTHETA; i++) {
     double th = nd_theta_true[i], D = NDS_FIT_D_DEFAULT;
+    cfg->upper[i] = INFINITY;
     cfg->mu0[i] = th;
     cfg->sigma0[i] = (th + D * th - fmax(cfg->lower, th - D * th)) / 16;
   }
@@ -140,6 +141,8 @@ int nds_fit_cfg_check(const nds_fit_cfg *c, char *err, int errlen) {
                c->scan_lo[i] >= c->lower && c->scan_lo[i] < c->scan_hi[i]))
       bad = "scan needs lower <= scan_lo < scan_hi, both finite";
   }
+  for (int i = 0; i < ND_NTHETA && !bad; i++)
+    if (c->fit[i] && !(c->upper[i] > c->lower)) bad = "upper must be > lower (INFINITY: none)";
   if (bad) {
     snprintf(err, errlen, "fit: %s", bad);
     return -1;
@@ -233,13 +236,14 @@ nds_fit *nds_fit_create(const nds_model *proto, const nds_fit_cfg *cfg, nd_pool 
     for (int i = 0; i < ND_NTHETA; i++) f->cur[ND_NTHETA * w + i] = NAN;
   }
 
-  double lower[ND_NTHETA];
+  double lower[ND_NTHETA], upper[ND_NTHETA];
   for (int i = 0; i < ND_NTHETA; i++) {
     if (!cfg->fit[i]) continue;
     f->idx[f->nfit] = i;
     f->scale[f->nfit] = cfg->logfit[i] ? cfg->sigma0[i] / fmax(cfg->lower, cfg->mu0[i])
                                        : cfg->sigma0[i];
     lower[f->nfit] = nds_fit_x(f, f->nfit, cfg->lower);
+    upper[f->nfit] = isfinite(cfg->upper[i]) ? nds_fit_x(f, f->nfit, cfg->upper[i]) : INFINITY;
     f->nfit++;
   }
   nd_cem_cfg cc;
@@ -249,6 +253,7 @@ nds_fit *nds_fit_create(const nds_model *proto, const nds_fit_cfg *cfg, nd_pool 
   cc.step_std = cfg->step_std;
   cc.step_gate = cfg->step_gate;
   cc.lower = lower;
+  cc.upper = upper;
   f->cem = nd_cem_create(&cc, err, errlen);
   if (!f->cem) {
     nds_fit_free(f);

@@ -49,6 +49,7 @@ typedef struct {
                                   whose prior spans decades); its std in and out is then
                                   theta times the std of ln theta. 0: as theta */
   double lower;                /* every fitted parameter stays >= lower > 0 (samples clipped) */
+  double upper[ND_NTHETA];     /* and <= upper[i] > lower (INFINITY: unbounded, the default) */
   double std_floor;            /* std never falls below std_floor * sigma0 (0: the paper's
                                   plain CEM, which freezes after a run or two) */
   double step_std;             /* nd_cem's step_std (the std follows the mean's steps; 0 off) */

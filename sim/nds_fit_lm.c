@@ -118,7 +118,7 @@ static int lm_solve(nds_fit *f, const nd_rollout *rs, int n, int iters,
   for (int j = 0; j < f->nfit; j++) {
     x[j] = nds_fit_x(f, j, theta[f->idx[j]]);
     lo[j] = nds_fit_x(f, j, f->cfg.lower);
-    hi[j] = 1e6;
+    hi[j] = isfinite(f->cfg.upper[f->idx[j]]) ? nds_fit_x(f, j, f->cfg.upper[f->idx[j]]) : 1e6;
     sc[j] = 1.0;
   }
   nd_lm_cfg lc;

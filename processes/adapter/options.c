@@ -47,8 +47,9 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
       {"log-fit", ND_OPT_CUSTOM, &o->logfit, .parse = parse_list, .arg = "LIST", .def = "none",
        .help = "fitted parameters searched as ln theta, with the paper's prior std taken of "
                "ln theta, ln((r + D r) / max(1e-7, r - D r)) / 16: for a prior that spans "
-               "decades, as torsional friction started at 1; held parameters ignore it "
-               "(doc/decisions.md#log-fit)"},
+               "decades, as torsional friction started at 1, and kept at most r + D r, where the "
+               "loss is flat beyond; held parameters ignore it (doc/decisions.md#log-fit, "
+               "#log-upper)"},
       {"scan", ND_OPT_CUSTOM, &o->scan, .parse = parse_list, .arg = "LIST", .def = "torsion",
        .help = "fitted parameters each refit first tries at --scan-points points spread "
                "over the prior's range, max(1e-7, r - D r) to r + D r (geometrically with "
@@ -153,6 +154,11 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
       fc->logfit[i] = 1;
       fc->sigma0[i] = log((r + D * r) / fmax(fc->lower, r - D * r)) / 16 *
                       fmax(fc->lower, o->theta[i]);
+      /* Searched within the prior's range: where the prior spans decades its top is
+       * already where the parameter stops mattering (torsional friction 1 lets no box
+       * turn), and the loss is flat beyond, which a log search would walk along for
+       * decades (doc/decisions.md#log-upper). */
+      fc->upper[i] = fmax(r + D * r, o->theta[i]);
     }
   }
   fc->replay.mode = o->replay_mode;

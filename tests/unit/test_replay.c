@@ -926,6 +926,32 @@ static void test_fit_log_torsion(void **state) {
   assert_true(end[1] < 0.05 && end[1] < end[0]);
   assert_true(Lend[1] < 0.5 * Lend[0]);
 
+  /* An upper bound below the truth holds the log search: torsion ends at it, not past it.
+   * Bounds at or under lower are refused. */
+  {
+    nds_fit_cfg cfg;
+    nds_fit_cfg_default(&cfg);
+    cfg.pop = 16;
+    cfg.iters = 2;
+    cfg.seed = 5;
+    cfg.fit[ND_TH_SLIDE] = cfg.fit[ND_TH_ROLL] = 0;
+    cfg.mu0[ND_TH_TORSION] = 0.002;
+    cfg.logfit[ND_TH_TORSION] = 1;
+    cfg.sigma0[ND_TH_TORSION] = log(0.004 / 1e-7) / 16 * 0.002;
+    cfg.upper[ND_TH_TORSION] = 0.002;
+    nds_fit *f = nds_fit_create(&nm, &cfg, pool, err, sizeof(err));
+    assert_non_null(f);
+    nds_fit_out out;
+    assert_int_equal(nds_fit_run(f, push, NPUSH, &out, err, sizeof(err)), 0);
+    printf("ln theta under 0.002 (truth 0.005): torsion %.4g\n", out.mean[ND_TH_TORSION]);
+    assert_true(out.mean[ND_TH_TORSION] <= 0.002 * (1 + 1e-9));
+    assert_true(out.mean[ND_TH_TORSION] > 0.001);
+    nds_fit_free(f);
+    cfg.upper[ND_TH_TORSION] = cfg.lower;
+    assert_null(nds_fit_create(&nm, &cfg, pool, err, sizeof(err)));
+    assert_non_null(strstr(err, "upper"));
+  }
+
   nds_fit_cfg bad;
   nds_fit_cfg_default(&bad);
   bad.logfit[ND_TH_SLIDE] = 2;
