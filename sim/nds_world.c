@@ -135,13 +135,20 @@ static int load_sphere(nds_world *w, char *err, int errlen) {
   return 0;
 }
 
+/* The object at rest flat on the table at (x, y, yaw). */
+static void put_object(nds_world *w, double x, double y, double yaw) {
+  double *q = w->d->qpos + w->obj_qpos;
+  q[0] = x, q[1] = y, q[2] = w->cfg.object.obj_half[2];
+  nd_yaw_quat(yaw, q + 3);
+  memset(w->d->qvel + w->obj_dof, 0, 6 * sizeof(double));
+  memset(w->d->qacc_warmstart + w->obj_dof, 0, 6 * sizeof(double));
+}
+
 /* Object and arm at their start, at rest. */
 static void arm_start(nds_world *w) {
   const double *o = w->cfg.obj;
   mj_resetData(w->m, w->d);
-  double *q = w->d->qpos + w->obj_qpos;
-  q[0] = o[0], q[1] = o[1], q[2] = w->cfg.object.obj_half[2];
-  q[3] = cos(0.5 * o[2]), q[4] = q[5] = 0.0, q[6] = sin(0.5 * o[2]);
+  put_object(w, o[0], o[1], o[2]);
   nds_panda_set_q(&w->panda, w->m, w->d, w->q0);  /* also runs mj_forward */
 }
 
@@ -263,12 +270,7 @@ double nds_world_place(nds_world *w, double x, double y, double yaw, double clea
   double ee[2], n[2];
   nds_world_ee(w, ee);
   const double gap = nd_release_gap(&b, w->cfg.object.ee_radius, ee, n);
-  if (gap < clear) return gap;
-  double *q = w->d->qpos + w->obj_qpos;
-  q[0] = x, q[1] = y, q[2] = w->cfg.object.obj_half[2];
-  nd_yaw_quat(yaw, q + 3);
-  memset(w->d->qvel + w->obj_dof, 0, 6 * sizeof(double));
-  memset(w->d->qacc_warmstart + w->obj_dof, 0, 6 * sizeof(double));
+  if (gap >= clear) put_object(w, x, y, yaw);
   return gap;
 }
 

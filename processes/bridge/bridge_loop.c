@@ -178,7 +178,7 @@ static void put_arm(bridge_loop *b, const nds_world_robot *r, int64_t utime) {
 }
 
 /* The newest PLACE, applied once the sphere is its clear from the pose, or dropped after
- * BRIDGE_PLACE_WAIT. 1 when the report has news. */
+ * NUDGE_PLACE_T_WAIT. 1 when the report has news. */
 static int place(bridge_loop *b, double now) {
   bridge_place pl;
   if (nd_mailbox_take(&b->place, &b->pl_version, &pl, sizeof(pl)) == (int)sizeof(pl))
@@ -187,7 +187,7 @@ static int place(bridge_loop *b, double now) {
   const double *p = b->pl.pose;
   const double gap = nds_world_place(b->world, p[0], p[1], p[2], b->pl.clear);
   const int placed = gap >= b->pl.clear;
-  if (!placed && now - b->pl.arrival < BRIDGE_PLACE_WAIT) return 0;
+  if (!placed && now - b->pl.arrival < NUDGE_PLACE_T_WAIT) return 0;
   b->pl_pending = 0;
   if (placed) b->rep.places++;
   else b->rep.places_dropped++;

@@ -20,6 +20,7 @@
 #include "nd_rtio.h"
 #include "nd_rtloop.h"
 #include "nds_world.h"
+#include "nudge/nudge_place_t.h"
 
 /* A validated EE_CMD as the loop needs it, stamped with its local arrival. */
 typedef struct {
@@ -66,8 +67,7 @@ typedef struct {
 } bridge_place;
 
 /* A PLACE waits until the sphere is its clear from the pose (the planner moves it there
- * while idle), at most BRIDGE_PLACE_WAIT s; then it is dropped and reported. */
-#define BRIDGE_PLACE_WAIT 10.0
+ * while idle), at most NUDGE_PLACE_T_WAIT s; then it is dropped and reported. */
 
 /* How a step's setpoint was sampled, for telling what a reflex stop followed. */
 typedef enum {

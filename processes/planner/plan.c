@@ -162,7 +162,7 @@ static int release_sensed(const planner_proc *p, double now) {
 static int placing(planner_proc *p, double now) {
   if (!p->place_pending) return 0;
   const double dx = p->mocap.obj_pos[0] - p->place.x, dy = p->mocap.obj_pos[1] - p->place.y;
-  if (now - p->place_at > PLANNER_PLACE_WAIT ||
+  if (now - p->place_at > NUDGE_PLACE_T_WAIT ||
       (p->mocap.utime > p->place.utime && hypot(dx, dy) < PLANNER_PLACE_AT))
     p->place_pending = 0;
   return p->place_pending;

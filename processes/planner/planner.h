@@ -64,10 +64,9 @@ typedef struct {
 /* A PLACE (an operator resets the object) needs the sphere clear of the new pose: while
  * idle, the release and keep-clear go by that pose, PLANNER_PLACE_EXTRA beyond the
  * PLACE's clear (tracking error), until MOCAP shows the object within PLANNER_PLACE_AT of
- * it, or for PLANNER_PLACE_WAIT s (the bridge's wait). */
+ * it, or for as long as the request stands (NUDGE_PLACE_T_WAIT). */
 #define PLANNER_PLACE_EXTRA 0.003
 #define PLANNER_PLACE_AT 0.005
-#define PLANNER_PLACE_WAIT 10.0
 
 /* Niceness the planning threads add to the process's: below its LCM receive thread. */
 #define PLANNER_COMPUTE_NICE 5

@@ -51,9 +51,9 @@ static int add_goal(const char *v, const char *what, void *dst, char *err, int e
 static int set_place(const char *v, const char *what, void *dst, char *err, int errlen) {
   tasks_cfg *c = dst;
   char why[400];
-  int commas = 0;
-  for (const char *q = v; *q; q++) commas += *q == ',';
-  if (commas != 2) {
+  /* A goal's text without its optional EPS and TIME_LIMIT: exactly two commas. */
+  const char *c1 = strchr(v, ','), *c2 = c1 ? strchr(c1 + 1, ',') : NULL;
+  if (!c2 || strchr(c2 + 1, ',')) {
     snprintf(err, errlen, "%s: expected X,Y,YAW, got '%s'", what, v);
     return -1;
   }

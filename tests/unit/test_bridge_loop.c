@@ -439,7 +439,7 @@ static void test_step_allocates_nothing(void **state) {
  * takes the sphere 12 cm away; once its surface is the PLACE's clear from the pose's sides
  * the object is put there, and the motion capture shows it there, at rest, within its
  * noise; no reflex stops the arm. A PLACE whose pose the sphere keeps to is dropped after
- * BRIDGE_PLACE_WAIT, the object left where it was. */
+ * NUDGE_PLACE_T_WAIT, the object left where it was. */
 static void test_lab_place(void **state) {
   (void)state;
   nds_world *w = lab_bridge();
@@ -477,7 +477,7 @@ static void test_lab_place(void **state) {
     const bridge_cmd c = exec_send(1e-3 * k);
     nd_mailbox_post(&g_b.cmd, &c, sizeof c);
     /* The clock jumps past the wait at the 100th step. */
-    bridge_loop_step(&g_b, T0 + 1e-3 * k + (j >= 100 ? BRIDGE_PLACE_WAIT : 0.0),
+    bridge_loop_step(&g_b, T0 + 1e-3 * k + (j >= 100 ? NUDGE_PLACE_T_WAIT : 0.0),
                      U0 + (int64_t)k * 1000);
     drain(&d);
     if (j == 99) assert_int_equal(g_b.rep.places_dropped, 0);

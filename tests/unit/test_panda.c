@@ -312,11 +312,6 @@ static void test_ik_workspace_grid(void **state) {
   assert_contains(err, "IK: (-0.300");
 }
 
-/* The reach map agrees with IK at points between its nodes in every direction, its joint
- * accelerations at speed with IK's second differences along the path (the velocity-product
- * terms), serves the lab box at the lab's 0.5 m/s, tells radial from cross motion, shows
- * where beyond the box the arm cannot go that fast, and is infinite where there is no IK or
- * no map. */
 /* Why the lab's Cartesian caps may exceed what every direction allows (nudge-up's
  * LAB_PLAN_A 2.5 m/s^2 at LAB_ARM_LOAD 0.9, decisions#lab-caps): from rest, across the
  * arm's reach (y) the joints take 2.5 m/s^2 within 0.9 of their limits at most points of
@@ -343,6 +338,11 @@ static void test_reach_lab_caps(void **state) {
   nds_reach_free(&r);
 }
 
+/* The reach map agrees with IK at points between its nodes in every direction, its joint
+ * accelerations at speed with IK's second differences along the path (the velocity-product
+ * terms), serves the lab box at the lab's 0.5 m/s, tells radial from cross motion, shows
+ * where beyond the box the arm cannot go that fast, and is infinite where there is no IK or
+ * no map. */
 static void test_reach_map(void **state) {
   (void)state;
   nds_panda_cfg cfg;

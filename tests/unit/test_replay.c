@@ -823,6 +823,15 @@ static void test_fit_recovers_sliding(void **state) {
   nd_pool_free(pool);
 }
 
+/* A small fit of torsional friction alone (Q 16, C 2, seed 5), the others held. */
+static void torsion_cfg(nds_fit_cfg *cfg) {
+  nds_fit_cfg_default(cfg);
+  cfg->pop = 16;
+  cfg->iters = 2;
+  cfg->seed = 5;
+  cfg->fit[ND_TH_SLIDE] = cfg->fit[ND_TH_ROLL] = 0;
+}
+
 /* A torsional friction drawn far below the truth (0.0006 against 0.005, as the live
  * study's low draws) with the paper's D = 1 std (0.000625). On these exact records the loss
  * is a bowl and CEM's long steps climb it part of the way in one run (to ~0.003); the scan
@@ -839,11 +848,7 @@ static void test_fit_scan(void **state) {
   int moved[2];
   for (int on = 0; on < 2; on++) {
     nds_fit_cfg cfg;
-    nds_fit_cfg_default(&cfg);
-    cfg.pop = 16;
-    cfg.iters = 2;
-    cfg.seed = 5;
-    cfg.fit[ND_TH_SLIDE] = cfg.fit[ND_TH_ROLL] = 0;
+    torsion_cfg(&cfg);
     cfg.mu0[ND_TH_TORSION] = 0.0006;
     cfg.sigma0[ND_TH_TORSION] = 0.01 / 16;
     if (on) {
@@ -894,11 +899,7 @@ static void test_fit_log_torsion(void **state) {
   double end[2], Lend[2];
   for (int log_on = 0; log_on < 2; log_on++) {
     nds_fit_cfg cfg;
-    nds_fit_cfg_default(&cfg);
-    cfg.pop = 16;
-    cfg.iters = 2;
-    cfg.seed = 5;
-    cfg.fit[ND_TH_SLIDE] = cfg.fit[ND_TH_ROLL] = 0;
+    torsion_cfg(&cfg);
     cfg.mu0[ND_TH_TORSION] = 1.0;
     cfg.sigma0[ND_TH_TORSION] = (2.0 - 1e-7) / 16;  /* D = 1 about 1 */
     if (log_on) {
@@ -930,11 +931,7 @@ static void test_fit_log_torsion(void **state) {
    * Bounds at or under lower are refused. */
   {
     nds_fit_cfg cfg;
-    nds_fit_cfg_default(&cfg);
-    cfg.pop = 16;
-    cfg.iters = 2;
-    cfg.seed = 5;
-    cfg.fit[ND_TH_SLIDE] = cfg.fit[ND_TH_ROLL] = 0;
+    torsion_cfg(&cfg);
     cfg.mu0[ND_TH_TORSION] = 0.002;
     cfg.logfit[ND_TH_TORSION] = 1;
     cfg.sigma0[ND_TH_TORSION] = log(0.004 / 1e-7) / 16 * 0.002;

@@ -18,7 +18,6 @@ static void sp_at(double x, double y, double sp[2][4]) {
   sp[1][ND_P] = y;
 }
 
-/* The sphere away from the box: a two-keypoint move ending at rest. */
 /* The test model at step dt with theta th (NULL: the truth), its mjData, and the default
  * controller in ctrl; close_model frees both. */
 static mjData *open_model(nds_model *nm, double dt, const double *th, nds_ctrl_cfg *ctrl) {
@@ -32,6 +31,7 @@ static void close_model(nds_model *nm, mjData *d) {
   nds_model_free(nm);
 }
 
+/* The sphere away from the box: a two-keypoint move ending at rest. */
 static const double free_keys[8] = {-0.2, 0.25, 0.3, 0.1, -0.1, 0.2, 0, 0};
 
 static void free_start(const nds_model *nm, nds_state *s, double sp[2][4]) {
