@@ -4,8 +4,8 @@
 #
 #   netns-run bash test_planner_kill.sh BUILD_DIR
 #
-# `nudge-up run` + lcm-logger + nudge-tasks on one far goal, planned at up to 0.3 m/s (tau
-# 15 s). Once plans flow and the end-effector moves, SIGKILL the planner.
+# `nudge-up run` + lcm-logger + nudge-tasks on one goal 30 cm away, planned at up to
+# 0.3 m/s (tau 15 s). Once plans flow and the end-effector moves, SIGKILL the planner.
 # From the log, measured from the last PLAN: the executor gives up on it by its plan
 # timeout (--plan-timeout 0.1 s) + 20 ms, and the setpoints are at rest (HOLDING, zero speed)
 # within the timeout plus 100 ms. That budget holds the brake from slow pushing (speed at
@@ -29,12 +29,15 @@ RUN=$PT_WORK/run
 # (NUDGE_SLOW) plans less often than that, and the executor would brake between any two
 # plans; its timeout is scaled so that it tracks until the kill, as in a Release run.
 TIMEOUT_S=$(pt_slow 0.1)
-# ~40 cm from the object's start at the origin, within eps 2e-3 (about 4.5 cm): loose
+# 30 cm from the object's start at the origin, within eps 2e-3 (about 4.5 cm): loose
 # enough that the restarted planner finishes (at the demo's 1e-3, about 3 cm, a push now
-# and then ends 3-4 cm off and circles there until the time limit). The kill must come
-# while the push is under way, and the log poll that times it can lag the push's start by
-# up to ~0.85 s in an ASan build: at most V_MAX the push takes over 1.3 s.
-GOAL=0.40,0.05,0,2e-3
+# and then ends 3-4 cm off and circles there until the time limit). The goal keeps 12 cm
+# from where the sphere can still push the box back (keypoints to x 0.5, the box's half
+# length plus the sphere's radius 0.075 m): from an overshoot near that edge no plan can
+# bring the box back. The kill must come while the push is under way, and the log poll
+# that times it can lag the push's start by up to ~0.85 s in an ASan build: at most V_MAX
+# the push takes over 1 s.
+GOAL=0.30,0.05,0,2e-3
 V_MAX=0.3
 
 pt_logger "$LOG"
