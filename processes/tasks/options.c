@@ -17,16 +17,16 @@ static const nd_goal chain[] = {
     {.x = 0.00, .y = 0.20, .yaw = 0.3},
 };
 
-/* The lab arm serves x [-0.15, 0.15], y [-0.30, 0.40] (sim/nds_panda.h): pushes of 15-20 cm,
+/* The lab arm serves x [-0.15, 0.15], y [-0.30, 0.40] (sim/nds_panda.h): pushes of 15-18 cm,
  * laid out so the sphere's place behind the object (8 cm back along the push, 3 cm to the
  * side its turn needs) stays in that box at the start and end of each, the push from the
  * last goal back to the first included, so the chain can run twice: a diagonal push with a
  * turn, a push ahead with more turn, a pull back that needs the sphere to go around, back
- * across, and a diagonal push away from the arm (decisions#lab-chain-rule). */
+ * across, and a diagonal push out toward the box's edge (decisions#lab-chain-rule). */
 static const nd_goal chain_lab[] = {
     {.x = 0.09, .y = 0.12, .yaw = 0.4}, {.x = 0.06, .y = 0.30, .yaw = 0.8},
     {.x = -0.09, .y = 0.21, .yaw = 0.3}, {.x = 0.00, .y = 0.06, .yaw = 0.0},
-    {.x = 0.10, .y = -0.08, .yaw = 0.3},
+    {.x = 0.12, .y = -0.06, .yaw = 0.3},
 };
 static const char *const world_words[] = {"ideal", "lab", NULL};
 static const char *const control_words[] = {"force", "velocity", NULL};
