@@ -91,6 +91,7 @@ void nd_rtloop_wake(nd_rtloop *l, int64_t *next_ns, int64_t now_ns, int64_t utim
   const int64_t first = *next_ns + (due - run) * period;
   l->st.skipped += due - run;
   nd_rtloop_tick tk;
+  tk.wake_utime = utime_now;
   for (int64_t k = 0; k < run; k++) {
     const int64_t dl = first + k * period;
     tk.deadline = 1e-9 * (double)dl;

@@ -42,6 +42,7 @@ typedef struct {
                          * between the clocks measured outside the cycles, so a preemption
                          * between two clock reads cannot stamp a setpoint with another
                          * time than it is for (doc/decisions.md#command-sampling) */
+  int64_t wake_utime;   /* wall-clock us of the wake-up: utime_now of its first cycle */
   int catching_up;      /* 1 for the extra cycles of a CATCH_UP wake-up */
 } nd_rtloop_tick;
 

@@ -11,6 +11,7 @@
 
 void bridge_loop_init(bridge_loop *b, nds_world *w, double cmd_timeout) {
   memset(b, 0, sizeof(*b));
+  b->awake_since = -INFINITY;
   b->world = w;
   b->cmd_timeout = cmd_timeout;
   nd_mailbox_init(&b->cmd);
@@ -112,7 +113,8 @@ static int setpoint(bridge_loop *b, double now, int64_t utime, double sp[2][4]) 
     b->silent = 0;
   }
   const double h = (double)(utime - b->last.utime) * 1e-6, silence = now - b->last.arrival;
-  const int timely = b->have_cmd && silence <= b->cmd_timeout;
+  const int timely = b->have_cmd && (silence <= b->cmd_timeout ||
+                                     now - b->awake_since <= b->cmd_timeout);
   const int fresh = timely && h - silence <= BRIDGE_CMD_HORIZON;
   int changed = 0;
   if (fresh && b->holding) {
@@ -222,7 +224,7 @@ void bridge_loop_step(bridge_loop *b, double now, int64_t utime) {
     post = 1;
   }
 
-  unsigned char *slot = nd_ring_reserve(&b->out);
+  unsigned char *slot = b->quiet ? NULL : nd_ring_reserve(&b->out);
   if (slot) {
     nudge_robot_state_t rs;
     memset(&rs, 0, sizeof(rs));
@@ -246,7 +248,7 @@ void bridge_loop_step(bridge_loop *b, double now, int64_t utime) {
   const double t = nds_world_time(b->world);
   for (int i = 0; i < out.nframes; i++) {
     const nds_world_frame *f = &out.frame[i];
-    slot = nd_ring_reserve(&b->out);
+    slot = b->quiet ? NULL : nd_ring_reserve(&b->out);
     if (slot) {
       nudge_mocap_t mc;
       memset(&mc, 0, sizeof(mc));
@@ -262,7 +264,11 @@ void bridge_loop_step(bridge_loop *b, double now, int64_t utime) {
     }
     b->mc_seq++;
   }
-  if (out.robot.arm && b->rep.steps % BRIDGE_LOOP_ARM_STEPS == 0) put_arm(b, &out.robot, utime);
+  if (out.robot.arm && b->rep.steps % BRIDGE_LOOP_ARM_STEPS == 0) {
+    if (b->quiet) b->arm_seq++;
+    else put_arm(b, &out.robot, utime);
+  }
+  b->rep.unpublished += b->quiet;
   b->rep.steps++;
   if (post || b->rep.steps % BRIDGE_LOOP_REPORT_STEPS == 0) bridge_loop_report_post(b);
 }
@@ -272,5 +278,11 @@ int bridge_loop_catch_up_max(double rate) {
 }
 
 void bridge_loop_tick(void *ctx, const nd_rtloop_tick *t) {
-  bridge_loop_step(ctx, t->deadline, t->utime);
+  bridge_loop *b = ctx;
+  /* How old this deadline is at the wake-up that serves it. */
+  const double late = 1e-6 * (double)(t->wake_utime - t->utime);
+  if (late > BRIDGE_STALL_S) b->awake_since = t->deadline + late;
+  b->quiet = late > BRIDGE_PUBLISH_S;
+  bridge_loop_step(b, t->deadline, t->utime);
+  b->quiet = 0;
 }

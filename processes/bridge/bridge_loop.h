@@ -93,6 +93,7 @@ typedef struct {
   int64_t place_id;     /* the newest placed or dropped PLACE */
   double place_pose[3], place_gap; /* its pose and the sphere's gap to it, m */
   int64_t robot_states, frames, arm_states;
+  int64_t unpublished;  /* steps of a replay older than BRIDGE_PUBLISH_S: no messages */
   double hold_pos[2];  /* the setpoint while holding */
   int32_t holding, have_cmd, stopped;
   int32_t apart;       /* the hold is for stamps apart by over BRIDGE_CMD_HORIZON */
@@ -126,6 +127,8 @@ typedef struct {
   int64_t join_utime;
   int joining;
   int silent;          /* the newest command's silence is reported */
+  double awake_since;  /* monotonic s: the latest wake-up after a stall (BRIDGE_STALL_S) */
+  int quiet;           /* this step publishes nothing (BRIDGE_PUBLISH_S) */
   bridge_sample sample[2]; /* this step's, and the step's before */
   uint64_t cmd_version;
   int have_cmd, holding;
@@ -148,13 +151,23 @@ void bridge_loop_step(bridge_loop *b, double now, int64_t utime);
  * deadline's time, so world time keeps up with real time. */
 void bridge_loop_tick(void *ctx, const nd_rtloop_tick *t);
 
-/* How long a stall of the machine the loop replays whole (s), beyond the default command
- * timeout. Every deadline the commands are stamped for gets its world step, so the robot
- * lives through the stall as the commands did; a deadline skipped would move the sampled
- * setpoint by the skipped time in one step (3 mm at 0.3 m/s and 10 ms, 3 m/s to the
- * velocity reflex). Longer stalls leave the commands stale anyway. At 1 kHz a whole
- * replay's messages (150 states, 36 frames, 8 arm states) fit the out ring unread. */
-#define BRIDGE_CATCH_UP_S 0.15
+/* How long a stall of the machine the loop replays whole (s). Every deadline the commands
+ * are stamped for gets its world step, so the robot lives through the stall as the
+ * commands did; a deadline skipped would move the sampled setpoint by the skipped time in
+ * one step (3 mm at 0.3 m/s and 10 ms, 3 m/s to the velocity reflex). Stalls of 0.24-0.27 s
+ * came on a loaded day (decisions#long-stall). */
+#define BRIDGE_CATCH_UP_S 1.0
+
+/* A replayed step publishes its messages only if its deadline is at most this old (s): the
+ * newest 0.15 s of a replay (150 states, 36 frames, 8 arm states) fit the out ring unread,
+ * and older states are of use to no receiver. The rest show as gaps in seq. */
+#define BRIDGE_PUBLISH_S 0.15
+
+/* A wake-up this late (s) ends a stall of the whole machine: the commander was frozen with
+ * the loop, so its silence counts only from the wake-up, and until the timeout has passed
+ * in waking time the robot follows the trajectory the last command committed to (which
+ * ends at rest), not a hold that the commander's next command would jump away from. */
+#define BRIDGE_STALL_S 0.02
 
 /* nd_rtloop_cfg.catch_up_max for a loop at rate Hz: BRIDGE_CATCH_UP_S of deadlines. */
 int bridge_loop_catch_up_max(double rate);

@@ -113,14 +113,15 @@ int main(int argc, char **argv) {
                "commands after a followed future joined, %lld placements (%lld dropped), %lld holds "
                "for EE_CMD stamps apart, inputs %lld received %lld refused (%lld "
                "EE_CMD outside the workspace), period error p50 %d p99 %d max %d us, overruns "
-               "%lld, dropped steps %lld, resets %lld, ring drops %llu\n",
+               "%lld, dropped steps %lld, steps replayed unpublished %lld, resets %lld, ring drops %llu\n",
           up, (long long)r->steps, r->steps / up, (long long)r->robot_states,
           (long long)r->frames, (long long)r->arm_states, (long long)r->stops,
           (long long)r->silent_events, 1e3 * BRIDGE_CMD_HORIZON, (long long)r->joins,
           (long long)r->places, (long long)r->places_dropped, (long long)r->apart_events,
           (long long)io.st.received, (long long)io.st.rejected,
           (long long)io.refused_ws.count, ls.p50_us, ls.p99_us, ls.max_us,
-          (long long)ls.overruns, (long long)ls.skipped, (long long)r->resets,
+          (long long)ls.overruns, (long long)ls.skipped, (long long)r->unpublished,
+          (long long)r->resets,
           (unsigned long long)atomic_load(&b->out.dropped));
 done:
   nd_rtloop_stop(&loop);

@@ -306,9 +306,8 @@ static void check_tick(void *ctx, const nd_rtloop_tick *t) {
  * executor woke first), so the setpoint keeps to the executor's trajectory to 1 um at every
  * deadline, none is skipped, and no reflex stops the arm (a skipped one would move the
  * setpoint by the skipped time in one step: decisions#catch-up). */
-static void test_lab_machine_stall(void **state) {
-  (void)state;
-  nds_world *w = lab_bridge();
+/* g_l: the bridge's 1 kHz catch-up schedule, ticking check_tick on g_b. */
+static void stall_loop_init(void) {
   memset(&g_l, 0, sizeof g_l);
   nd_rtloop_cfg_default(&g_l.cfg);
   g_l.cfg.policy = ND_RT_CATCH_UP;
@@ -319,6 +318,12 @@ static void test_lab_machine_stall(void **state) {
   nd_jitter_reset(&g_l.jit);
   g_ref = g_ex;
   g_off_max = 0;
+}
+
+static void test_lab_machine_stall(void **state) {
+  (void)state;
+  nds_world *w = lab_bridge();
+  stall_loop_init();
   /* S3's commands during the catch-up start no new plan (none at a multiple of 30), so
    * g_ref, the trajectory before the wake, still holds for them. */
   enum { STEPS = 1200, S1 = 400, S1_END = 445, S2 = 800, S2_END = 860, S3 = 1000,
@@ -351,6 +356,52 @@ static void test_lab_machine_stall(void **state) {
   assert_int_equal(g_b.rep.stops, 0);
   assert_int_equal(g_b.rep.apart_events + g_b.rep.hold_events, 0);
   assert_int_equal(g_b.rep.silent_events, 1);  /* the bridge woke first: it saw the silence */
+  nds_world_free(w);
+}
+
+/* The whole machine stalls for 0.25 s, longer than the commands' timeout and than the
+ * newest 0.15 s that a replay publishes: once the bridge wakes first, once the executor
+ * sends first. Every deadline still gets its world step on the executor's trajectory (to
+ * 1 um), no reflex stops the arm and it never holds: the frozen commander's silence counts
+ * from the wake-up (BRIDGE_STALL_S). The steps older than 0.15 s publish nothing: one gap in
+ * the ROBOT_STATE seq per stall, no ring drop. */
+static void test_lab_long_stall(void **state) {
+  (void)state;
+  nds_world *w = lab_bridge();
+  /* The executor's brake past the last plan's segment, within what the arm takes radially
+   * (nudge-up --world lab gives it 2.8 m/s^2, at which this brake loads joint 2 to 7.53
+   * rad/s^2 against 7.499: decisions#long-stall). */
+  g_ec.v_max = 0.65, g_ec.a_max = 2.0;
+  stall_loop_init();
+  enum { STEPS = 900, S4 = 300, S4_END = 550, S5 = 600, S5_END = 850 };
+  int64_t next = (int64_t)(T0 * 1e9);
+  drained d = {0};
+  g_feed_every = 0;
+  for (int k = 0; k < STEPS; k++) {
+    if ((k >= S4 && k < S4_END) || (k >= S5 && k < S5_END)) continue;  /* all asleep */
+    const int bridge_first = k == S4_END;
+    const int64_t now_ns = (int64_t)(T0 * 1e9) + (int64_t)k * 1000000 + 20000;
+    const int64_t utime_now = U0 + (now_ns - (int64_t)(T0 * 1e9)) / 1000;
+    if (bridge_first) nd_rtloop_wake(&g_l, &next, now_ns, utime_now), drain(&d);
+    const bridge_cmd c = live_send(k);
+    nd_mailbox_post(&g_b.cmd, &c, sizeof c);
+    if (!bridge_first) nd_rtloop_wake(&g_l, &next, now_ns, utime_now), drain(&d);
+    g_ref = g_ex;
+  }
+  const long quiet = (S4_END - S4 + S5_END - S5) - 2 * (long)llround(BRIDGE_PUBLISH_S * 1e3);
+  printf("long_stall_setpoint_off_max %.2e m\nlong_stall_skipped %lld count\n"
+         "long_stall_stops %lld count\nlong_stall_unpublished %lld count\n", g_off_max,
+         (long long)g_l.st.skipped, (long long)g_b.rep.stops, (long long)g_b.rep.unpublished);
+  assert_int_equal(g_l.st.skipped, 0);
+  assert_int_equal(g_b.rep.steps, STEPS);
+  assert_true(g_off_max < 1e-6);
+  assert_int_equal(g_b.rep.stops, 0);
+  assert_int_equal(g_b.rep.apart_events + g_b.rep.hold_events, 0);
+  assert_int_equal(d.mode, NUDGE_ROBOT_STATE_T_MODE_TRACKING);
+  assert_true(labs((long)g_b.rep.unpublished - quiet) <= 2);
+  assert_int_equal(d.states, STEPS - g_b.rep.unpublished);
+  assert_int_equal(d.seq_gaps, 2);
+  assert_int_equal(atomic_load(&g_b.out.dropped), 0);
   nds_world_free(w);
 }
 
@@ -497,6 +548,7 @@ int main(void) {
       cmocka_unit_test(test_lab_jittered_commands),
       cmocka_unit_test(test_lab_commander_silent),
       cmocka_unit_test(test_lab_machine_stall),
+      cmocka_unit_test(test_lab_long_stall),
       cmocka_unit_test(test_lab_late_switch),
       cmocka_unit_test(test_lab_place),
   };
