@@ -281,7 +281,8 @@ void bridge_loop_tick(void *ctx, const nd_rtloop_tick *t) {
   bridge_loop *b = ctx;
   /* How old this deadline is at the wake-up that serves it. */
   const double late = 1e-6 * (double)(t->wake_utime - t->utime);
-  if (late > BRIDGE_STALL_S) b->awake_since = t->deadline + late;
+  if (late > BRIDGE_STALL_S && b->have_cmd && t->deadline - b->last.arrival <= b->cmd_timeout)
+    b->awake_since = t->deadline + late;  /* the commands were timely when the stall began */
   b->quiet = late > BRIDGE_PUBLISH_S;
   bridge_loop_step(b, t->deadline, t->utime);
   b->quiet = 0;

@@ -164,9 +164,10 @@ void bridge_loop_tick(void *ctx, const nd_rtloop_tick *t);
 #define BRIDGE_PUBLISH_S 0.15
 
 /* A wake-up this late (s) ends a stall of the whole machine: the commander was frozen with
- * the loop, so its silence counts only from the wake-up, and until the timeout has passed
- * in waking time the robot follows the trajectory the last command committed to (which
- * ends at rest), not a hold that the commander's next command would jump away from. */
+ * the loop, so if its commands were timely when the stall began, their timeout counts from
+ * the wake-up, and until it has passed the robot follows the trajectory the last command
+ * committed to (which ends at rest), not a hold that the commander's next command would
+ * jump away from. Commands stale before the stall stay stale. */
 #define BRIDGE_STALL_S 0.02
 
 /* nd_rtloop_cfg.catch_up_max for a loop at rate Hz: BRIDGE_CATCH_UP_S of deadlines. */

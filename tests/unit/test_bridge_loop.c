@@ -402,6 +402,23 @@ static void test_lab_long_stall(void **state) {
   assert_int_equal(d.states, STEPS - g_b.rep.unpublished);
   assert_int_equal(d.seq_gaps, 2);
   assert_int_equal(atomic_load(&g_b.out.dropped), 0);
+
+  /* Then the executor falls silent for good: its last command goes stale and the robot
+   * holds where the sphere is. A stall after that revives no command: it holds on. */
+  enum { GONE_END = 1500, S6 = 1200, S6_END = 1400, HELD_FROM = 1050 };
+  int held = 1;
+  for (int k = STEPS; k < GONE_END; k++) {
+    if (k >= S6 && k < S6_END) continue;
+    const int64_t now_ns = (int64_t)(T0 * 1e9) + (int64_t)k * 1000000 + 20000;
+    nd_rtloop_wake(&g_l, &next, now_ns, U0 + (now_ns - (int64_t)(T0 * 1e9)) / 1000);
+    drain(&d);
+    if (k >= HELD_FROM) held &= g_b.holding;
+  }
+  printf("long_stall_gone_hold_events %lld count\n", (long long)g_b.rep.hold_events);
+  assert_true(held);
+  assert_int_equal(g_b.rep.hold_events, 1);
+  assert_int_equal(g_b.rep.stops, 0);
+  assert_int_equal(d.mode, NUDGE_ROBOT_STATE_T_MODE_HOLDING);
   nds_world_free(w);
 }
 
