@@ -154,8 +154,8 @@ void bridge_loop_tick(void *ctx, const nd_rtloop_tick *t);
 /* How long a stall of the machine the loop replays whole (s). Every deadline the commands
  * are stamped for gets its world step, so the robot lives through the stall as the
  * commands did; a deadline skipped would move the sampled setpoint by the skipped time in
- * one step (3 mm at 0.3 m/s and 10 ms, 3 m/s to the velocity reflex). Stalls of 0.24-0.27 s
- * came on a loaded day (decisions#long-stall). */
+ * one step (3 mm at 0.3 m/s and 10 ms, 3 m/s to the velocity reflex). On the loaded 2-core
+ * VM stalls reach 0.27 s (decisions#long-stall). */
 #define BRIDGE_CATCH_UP_S 1.0
 
 /* A replayed step publishes its messages only if its deadline is at most this old (s): the
