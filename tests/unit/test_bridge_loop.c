@@ -320,6 +320,13 @@ static void stall_loop_init(void) {
   g_off_max = 0;
 }
 
+/* g_l's wake-up at step k (20 us after its deadline on the synthetic clock), then drain. */
+static void stall_wake(int k, int64_t *next, drained *d) {
+  const int64_t now_ns = (int64_t)(T0 * 1e9) + (int64_t)k * 1000000 + 20000;
+  nd_rtloop_wake(&g_l, next, now_ns, U0 + (now_ns - (int64_t)(T0 * 1e9)) / 1000);
+  drain(d);
+}
+
 static void test_lab_machine_stall(void **state) {
   (void)state;
   nds_world *w = lab_bridge();
@@ -336,13 +343,11 @@ static void test_lab_machine_stall(void **state) {
       continue;  /* all asleep */
     if (k > S3_END && k <= g_fed) continue;  /* sent during the catch-up */
     const int bridge_first = k == S2_END;
-    const int64_t now_ns = (int64_t)(T0 * 1e9) + (int64_t)k * 1000000 + 20000;
-    const int64_t utime_now = U0 + (now_ns - (int64_t)(T0 * 1e9)) / 1000;
-    if (bridge_first) nd_rtloop_wake(&g_l, &next, now_ns, utime_now), drain(&d);
+    if (bridge_first) stall_wake(k, &next, &d);
     const bridge_cmd c = live_send(k);
     nd_mailbox_post(&g_b.cmd, &c, sizeof c);
     if (k == S3_END) g_fed = k, g_feed_every = FEED_EVERY, g_feed_ticks = 0;
-    if (!bridge_first) nd_rtloop_wake(&g_l, &next, now_ns, utime_now), drain(&d);
+    if (!bridge_first) stall_wake(k, &next, &d);
     g_feed_every = 0;
     g_ref = g_ex;
   }
@@ -380,12 +385,10 @@ static void test_lab_long_stall(void **state) {
   for (int k = 0; k < STEPS; k++) {
     if ((k >= S4 && k < S4_END) || (k >= S5 && k < S5_END)) continue;  /* all asleep */
     const int bridge_first = k == S4_END;
-    const int64_t now_ns = (int64_t)(T0 * 1e9) + (int64_t)k * 1000000 + 20000;
-    const int64_t utime_now = U0 + (now_ns - (int64_t)(T0 * 1e9)) / 1000;
-    if (bridge_first) nd_rtloop_wake(&g_l, &next, now_ns, utime_now), drain(&d);
+    if (bridge_first) stall_wake(k, &next, &d);
     const bridge_cmd c = live_send(k);
     nd_mailbox_post(&g_b.cmd, &c, sizeof c);
-    if (!bridge_first) nd_rtloop_wake(&g_l, &next, now_ns, utime_now), drain(&d);
+    if (!bridge_first) stall_wake(k, &next, &d);
     g_ref = g_ex;
   }
   const long quiet = (S4_END - S4 + S5_END - S5) - 2 * (long)llround(BRIDGE_PUBLISH_S * 1e3);
@@ -409,9 +412,7 @@ static void test_lab_long_stall(void **state) {
   int held = 1;
   for (int k = STEPS; k < GONE_END; k++) {
     if (k >= S6 && k < S6_END) continue;
-    const int64_t now_ns = (int64_t)(T0 * 1e9) + (int64_t)k * 1000000 + 20000;
-    nd_rtloop_wake(&g_l, &next, now_ns, U0 + (now_ns - (int64_t)(T0 * 1e9)) / 1000);
-    drain(&d);
+    stall_wake(k, &next, &d);
     if (k >= HELD_FROM) held &= g_b.holding;
   }
   printf("long_stall_gone_hold_events %lld count\n", (long long)g_b.rep.hold_events);
