@@ -85,6 +85,11 @@ static void use_robot_state(void *user, const nudge_robot_state_t *m) {
 static void use_ee_cmd(void *user, const nudge_ee_cmd_t *m) {
   tasks_io *io = user;
   io->st.received++;
+  if (io->run.id >= 0) {
+    const double v = hypot(m->v[0], m->v[1]);
+    if (v > io->run.cmd_speed_max) io->run.cmd_speed_max = v;
+  }
+  if (!io->buf) return;
   nd_rec_setpoint sp;
   memcpy(sp.p, m->p, sizeof(sp.p));
   memcpy(sp.v, m->v, sizeof(sp.v));
@@ -117,22 +122,21 @@ NDP_INPUT(nudge_plan_t, ndp_check_plan, on_plan_raw, use_plan, refuse)
 int tasks_subscribe(tasks_io *io, lcm_t *lcm, char *err, int errlen) {
   /* The runner handles input every 20 ms and appends (one fdatasync) between tasks: a
    * default queue of 30 would drop 1 kHz messages (the newest, as seq gaps). ROBOT_STATE
-   * always: it says when a reflex stopped the robot. */
+   * always: it says when a reflex stopped the robot; EE_CMD always: its top speed. */
   io->run.id = -1;
   io->robot_stopped = -1;  /* unknown: a stop before the runner started is not counted */
   lcm_subscription_t *rs = lcm_subscribe(lcm, NDP_CH_ROBOT_STATE, on_robot_state_raw, io);
   lcm_subscription_t *plan = lcm_subscribe(lcm, NDP_CH_PLAN, on_plan_raw, io);
-  if (!lcm_subscribe(lcm, NDP_CH_MOCAP, on_mocap_raw, io) || !rs || !plan ||
+  lcm_subscription_t *cmd = lcm_subscribe(lcm, NDP_CH_EE_CMD, on_ee_cmd_raw, io);
+  if (!lcm_subscribe(lcm, NDP_CH_MOCAP, on_mocap_raw, io) || !rs || !plan || !cmd ||
       lcm_subscription_set_queue_capacity(rs, RATE_QUEUE) ||
+      lcm_subscription_set_queue_capacity(cmd, RATE_QUEUE) ||
       lcm_subscription_set_queue_capacity(plan, 100)) {
-    snprintf(err, errlen, "subscribing to MOCAP, ROBOT_STATE and PLAN failed");
+    snprintf(err, errlen, "subscribing to MOCAP, ROBOT_STATE, EE_CMD and PLAN failed");
     return -1;
   }
-  if (!io->buf) return 0;
-  lcm_subscription_t *cmd = lcm_subscribe(lcm, NDP_CH_EE_CMD, on_ee_cmd_raw, io);
-  if (!cmd || !lcm_subscribe(lcm, NDP_CH_PARAMS, on_params_raw, io) ||
-      lcm_subscription_set_queue_capacity(cmd, RATE_QUEUE)) {
-    snprintf(err, errlen, "subscribing to EE_CMD and PARAMS failed");
+  if (io->buf && !lcm_subscribe(lcm, NDP_CH_PARAMS, on_params_raw, io)) {
+    snprintf(err, errlen, "subscribing to PARAMS failed");
     return -1;
   }
   return 0;

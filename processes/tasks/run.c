@@ -166,6 +166,7 @@ int tasks_run(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, const nd_goal *g, in
   r->obj_path = io->run.obj_path;
   r->ee_path = io->run.ee_path;
   r->ee_speed_max = io->run.ee_speed_max;
+  r->cmd_speed_max = io->run.cmd_speed_max;
   if (r->interrupted) {
     r->event = NUDGE_EPISODE_T_EVENT_TIMEOUT;
     snprintf(r->reason, sizeof(r->reason), "interrupted: the runner was stopped at %.2f s",
@@ -203,9 +204,9 @@ void tasks_print(int i, int n, const nd_goal *g, const tasks_result *r) {
                        : r->event == NUDGE_EPISODE_T_EVENT_SUCCESS ? "reached in"
                                                                    : "timed out after";
     printf("%s %.2f s, pos err %.3f m, yaw err %.1f deg, %lld plans, object path %.3f m, "
-           "sphere path %.3f m, sphere top speed %.2f m/s\n", what, r->time, r->pos_err,
-           r->yaw_err * 180.0 / ND_PI, (long long)r->plans, r->obj_path, r->ee_path,
-           r->ee_speed_max);
+           "sphere path %.3f m, sphere top speed %.2f m/s, command top speed %.2f m/s\n", what,
+           r->time, r->pos_err, r->yaw_err * 180.0 / ND_PI, (long long)r->plans, r->obj_path,
+           r->ee_path, r->ee_speed_max, r->cmd_speed_max);
   }
   fflush(stdout);
 }

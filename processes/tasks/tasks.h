@@ -99,6 +99,7 @@ typedef struct {
   int64_t plans;      /* PLANs for it */
   double obj_path, ee_path;  /* m travelled by object and sphere (MOCAP) */
   double ee_speed_max;       /* m/s, the sphere's top speed (ROBOT_STATE ee_vel) */
+  double cmd_speed_max;      /* m/s, the commanded top speed (EE_CMD v) */
   double last_obj[2], last_ee[2];
   int have_last;
   int resumed;        /* ROBOT_STATE has said the robot is not stopped since the task began */
@@ -134,6 +135,7 @@ typedef struct {
   int64_t plans;     /* PLANs received for the task */
   double obj_path, ee_path;  /* m */
   double ee_speed_max;       /* m/s */
+  double cmd_speed_max;      /* m/s */
   int met_at_start;  /* the goal was met before anything moved: nothing recorded */
   char reason[200];
 } tasks_result;

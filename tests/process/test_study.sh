@@ -105,16 +105,22 @@ n_end=$(grep -cE ': task [0-9]+ (succeeded|timed out|ended in a reflex stop) aft
 n_rel=$(grep -c ': released: ' "$PLOG")
 pt_check "the planner released the sphere after each of the $n_end tasks that ended (got $n_rel)" \
   test "$n_end" -ge 7 -a "$n_rel" = "$n_end"
-# Training pushes keep to their speed limit (the tracking controller may overshoot a
-# setpoint by a little, a stalled machine by more: 50 % allowed); evaluation runs at the
-# planner's own, faster.
-top() { sed -n 's/.*sphere top speed \([0-9.]*\) m\/s.*/\1/p' "$@" | sort -g | tail -n 1; }
-vt=$(top "$OUT"/run_0/train_ep*.txt) ve=$(top "$OUT"/run_0/eval_ep*.txt)
+# Training pushes keep to their speed limit: the executor's commands do (the planner ranks a
+# segment past it behind every one within it; 5 % for the odd plan with none within). The
+# sphere follows them with the world's tracking: it lags while it pushes and closes the lag
+# when the contact eases (0.24 m/s on commands of 0.19 here, 0.31 under ASan), so its
+# bound only tells a robot that ran off. Evaluation runs at the planner's own, faster.
+top() { sed -n "s/.*$1 top speed \([0-9.]*\) m\/s.*/\1/p" "${@:2}" | sort -g | tail -n 1; }
+ct=$(top command "$OUT"/run_0/train_ep*.txt) ce=$(top command "$OUT"/run_0/eval_ep*.txt)
+vt=$(top sphere "$OUT"/run_0/train_ep*.txt)
+pt_figure study_train_cmd_top_speed "$ct" m/s
 pt_figure study_train_top_speed "$vt" m/s
-pt_check "training pushes within --train-v-max $TV (top speed $vt m/s)" \
-  awk -v v="$vt" -v l="$TV" 'BEGIN { exit !(v != "" && v > 0 && v <= 1.5 * l) }'
-pt_check "evaluation pushes faster than training's limit (top speed $ve m/s)" \
-  awk -v v="$ve" -v l="$TV" 'BEGIN { exit !(v != "" && v > 1.5 * l) }'
+pt_check "training commands within --train-v-max $TV (top speed $ct m/s)" \
+  awk -v v="$ct" -v l="$TV" 'BEGIN { exit !(v != "" && v > 0 && v <= 1.05 * l) }'
+pt_check "the sphere in training within twice that (top speed $vt m/s)" \
+  awk -v v="$vt" -v l="$TV" 'BEGIN { exit !(v != "" && v > 0 && v <= 2 * l) }'
+pt_check "evaluation commands faster than training's limit (top speed $ce m/s)" \
+  awk -v v="$ce" -v l="$TV" 'BEGIN { exit !(v != "" && v > 1.5 * l) }'
 pt_check "the planner planned the training tasks at $TV m/s" \
   test "$(grep -c "started: .*speed limit $TV m/s" "$PLOG")" = 2
 fig() { awk -v n="$1" '$1 == n { print $2 }' "$PT_WORK/study.out"; }
