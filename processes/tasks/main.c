@@ -76,7 +76,8 @@ int main(int argc, char **argv) {
     if (cfg.record)
       tasks_buffer_finish(&buf, id0 + i, r.interrupted ? ND_OUTCOME_ABORTED
                                          : r.event == NUDGE_EPISODE_T_EVENT_SUCCESS ? ND_OUTCOME_SUCCESS
-                                                                                    : ND_OUTCOME_TIMEOUT);
+                                                                                    : ND_OUTCOME_TIMEOUT,
+                          r.obj_path);
     if (r.interrupted) break;
     ran++;
     const int rejected = r.event == NUDGE_EPISODE_T_EVENT_REJECTED;

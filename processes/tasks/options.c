@@ -115,7 +115,7 @@ int tasks_options(int argc, char **argv, tasks_cfg *c) {
       {"record", ND_OPT_STRING, &c->record, .arg = "FILE",
        .help = "append each task's rollout (start state, 1 kHz forces, setpoints, observed "
                "path) to the replay buffer FILE, created if missing, for nudge-adapter; one "
-               "writer at a time"},
+               "writer at a time; a task whose object moved under 1 cm is not recorded"},
       {"record-dt", ND_OPT_DOUBLE, &c->record_dt, 1e-5, 0.05, .arg = "S",
        .help = "the robot's control step, s (the bridge's 1/--rate); a task whose ROBOT_STATE "
                "period differs is not recorded"},

@@ -86,14 +86,21 @@ void tasks_buffer_begin(tasks_buffer *b, const nudge_mocap_t *m, int64_t id, con
                     b->control);
 }
 
-/* Stop recording the task and append it with outcome (ND_OUTCOME_*), or say why not. A
- * failure is reported and the runner goes on. */
-void tasks_buffer_finish(tasks_buffer *b, int64_t id, int outcome) {
+/* Stop recording the task and append it with outcome (ND_OUTCOME_*) unless its object
+ * moved under TASKS_RECORD_MOVED_MIN (obj_path, m), or say why not. A failure is reported
+ * and the runner goes on. */
+void tasks_buffer_finish(tasks_buffer *b, int64_t id, int outcome, double obj_path) {
   b->last_ok = 0;
   if (!b->rec.on) return;
   char why[600];
   const nd_rollout *r;
-  if (nd_recorder_finish(&b->rec, outcome, &r, why, sizeof(why)) == 0) {
+  const int ok = nd_recorder_finish(&b->rec, outcome, &r, why, sizeof(why)) == 0;
+  if (ok && obj_path < TASKS_RECORD_MOVED_MIN) {
+    fprintf(stderr, PROG ": task %lld not recorded: the object moved %.3f m (under %g m), "
+            "nothing of its friction to fit\n", (long long)id, obj_path, TASKS_RECORD_MOVED_MIN);
+    return;
+  }
+  if (ok) {
     char err[512];
     if (reopen(b, err, sizeof(err)) == 0 && nd_rbuf_append(&b->w, r, err, sizeof(err)) == 0) {
       b->appended++;

@@ -91,6 +91,11 @@ typedef struct {
 
 #define TASKS_PATH_STEP 0.002 /* m: paths are summed in steps of at least this */
 
+/* A task whose object moved less than this (m, MOCAP path) is not recorded: the sphere
+ * barely touched it, so a refit learns next to nothing from it yet pays for its replays,
+ * and a study would count it as an episode's push (decisions#untouched-push). */
+#define TASKS_RECORD_MOVED_MIN 0.01
+
 #define MAX_PLAN_AGES 100000 /* plan ages kept for the percentiles: hours of plans */
 
 /* What happened during the running task, as the handlers see it. */
@@ -152,7 +157,7 @@ int tasks_buffer_open(tasks_buffer *b, const char *path, double tau, double dt, 
                       const double theta[ND_NTHETA], char *err, int errlen);
 void tasks_buffer_close(tasks_buffer *b);
 void tasks_buffer_begin(tasks_buffer *b, const nudge_mocap_t *m, int64_t id, const nd_goal *g);
-void tasks_buffer_finish(tasks_buffer *b, int64_t id, int outcome);
+void tasks_buffer_finish(tasks_buffer *b, int64_t id, int outcome, double obj_path);
 
 /* run.c */
 int tasks_pump(lcm_t *lcm, tasks_io *io, double dt, char *err, int errlen);

@@ -10,7 +10,9 @@
 #
 # 0. seed: one task recorded into a buffer on a 1 MiB tmpfs, so the file holds a record
 #    written by the real recorder before trouble starts; then a goal met where the object
-#    lies (eps 1): reached at once, not recorded (no push to learn from), said so;
+#    lies (eps 1): reached at once, not recorded (no push to learn from), said so; then a
+#    task whose 50 ms limit ends before the sphere can move the object: not recorded, said
+#    so (a record every theta replays alike teaches a refit nothing);
 # 1. disk full: a dummy file fills the tmpfs; two tasks;
 # 2. read-only: a copy of the seeded buffer behind a read-only bind mount; two tasks;
 # 3. read-only, then writable again: the mount turns read-write after the first task's
@@ -132,6 +134,17 @@ pt_check "met: counted as met at the start" \
 pt_check "met: it says why it records nothing" \
   grep -qE '^nudge-tasks: task [0-9]+ not recorded: its goal is met at the start \(task error [0-9.e-]+ < eps 1\), nothing to push$' "$PT_WORK/met.err"
 pt_check "met: nothing appended (still one record)" test "$(records "$BUF")" = 1
+
+# --- 0c. a task over before the object moved (50 ms: the plan is barely out) -----------
+tasks still "$BUF" 0.25,0.10,0.4,2.5e-3,0.05
+finish still
+cat "$PT_WORK/still.out"
+pt_check "still: nudge-tasks exits 0 (got $PT_RC)" test "$PT_RC" -eq 0
+pt_check "still: timed out, not met at the start" \
+  test "$(figure tasks_met_at_start "$PT_WORK/still.out") $(figure tasks_reached "$PT_WORK/still.out")" = "0 0"
+pt_check "still: it says the object moved under 1 cm" \
+  grep -qE '^nudge-tasks: task [0-9]+ not recorded: the object moved 0\.00[0-9] m \(under 0\.01 m\), nothing of its friction to fit$' "$PT_WORK/still.err"
+pt_check "still: nothing appended (still one record)" test "$(records "$BUF")" = 1
 
 # --- 1. disk full ----------------------------------------------------------------------
 dd if=/dev/zero of="$FULL/filler" bs=4k status=none 2>/dev/null
