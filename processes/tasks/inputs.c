@@ -85,6 +85,8 @@ static void use_robot_state(void *user, const nudge_robot_state_t *m) {
 static void use_ee_cmd(void *user, const nudge_ee_cmd_t *m) {
   tasks_io *io = user;
   io->st.received++;
+  io->have_cmd = 1;
+  if (m->mode != NUDGE_EE_CMD_T_MODE_HOLDING) io->cmd_moving_at = ndp_mono();
   if (io->run.id >= 0) {
     const double v = hypot(m->v[0], m->v[1]);
     if (v > io->run.cmd_speed_max) io->run.cmd_speed_max = v;
@@ -125,6 +127,7 @@ int tasks_subscribe(tasks_io *io, lcm_t *lcm, char *err, int errlen) {
    * always: it says when a reflex stopped the robot; EE_CMD always: its top speed. */
   io->run.id = -1;
   io->robot_stopped = -1;  /* unknown: a stop before the runner started is not counted */
+  io->cmd_moving_at = -INFINITY;
   lcm_subscription_t *rs = lcm_subscribe(lcm, NDP_CH_ROBOT_STATE, on_robot_state_raw, io);
   lcm_subscription_t *plan = lcm_subscribe(lcm, NDP_CH_PLAN, on_plan_raw, io);
   lcm_subscription_t *cmd = lcm_subscribe(lcm, NDP_CH_EE_CMD, on_ee_cmd_raw, io);

@@ -110,8 +110,9 @@ int tasks_options(int argc, char **argv, tasks_cfg *c) {
       {"wait", ND_OPT_DOUBLE, &c->wait, 0.0, 3600.0, .arg = "S",
        .help = "wait for the first MOCAP frame (with --record: and ROBOT_STATE)"},
       {"settle", ND_OPT_DOUBLE, &c->settle, 0.0, 3600.0, .arg = "S",
-       .help = "pause before each task, then until the object is at rest (under 1 cm/s, at "
-               "most 5 s; a task it did not reach rest for is not recorded)"},
+       .help = "pause before each task, then until the object is at rest (under 1 cm/s) and "
+               "the commands have held the sphere for 0.3 s (at most 5 s; a task they did not "
+               "reach rest for is not recorded)"},
       {"record", ND_OPT_STRING, &c->record, .arg = "FILE",
        .help = "append each task's rollout (start state, 1 kHz forces, setpoints, observed "
                "path) to the replay buffer FILE, created if missing, for nudge-adapter; one "

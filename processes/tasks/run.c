@@ -293,13 +293,17 @@ int tasks_settle(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int er
       speed = frame_speed(&io->last, &ref);
       ref = io->last;
     }
-    if (now - t0 >= c->settle && speed < REST_SPEED) return 0;
+    const int held = !io->have_cmd || now - io->cmd_moving_at >= SETTLE_CMD_REST;
+    if (now - t0 >= c->settle && speed < REST_SPEED && held) return 0;
     if (now - t0 >= fmax(c->settle, SETTLE_MAX)) break;
     if (tasks_pump(lcm, io, 0.02, err, errlen)) return -1;
   }
   io->no_record = io->buf != NULL;
   const char *why = io->buf ? ": the next task is not recorded (a record starts at rest)" : "";
-  if (isfinite(speed))
+  if (speed < REST_SPEED)
+    fprintf(stderr, PROG ": the commands still move the sphere after %.1f s%s\n",
+            ndp_mono() - t0, why);
+  else if (isfinite(speed))
     fprintf(stderr, PROG ": the object still moves at %.3f m/s after %.1f s%s\n", speed,
             ndp_mono() - t0, why);
   else

@@ -42,6 +42,11 @@
 #define REST_SPAN 0.1    /* s */
 #define REST_ARM 0.05    /* m: about the object's half length */
 #define SETTLE_MAX 5.0   /* s */
+/* ... and until the commands (EE_CMD) have held the sphere at rest for SETTLE_CMD_REST,
+ * longer than the planner waits before sending it clear again (PLANNER_RECLEAR_WAIT): an
+ * object at rest against a sphere still on its way out, or about to be sent out, would
+ * start a record in contact. Without EE_CMD (no executor yet) only the object counts. */
+#define SETTLE_CMD_REST 0.3  /* s */
 /* --place: the PLACE is re-sent every PLACE_RESEND s until a MOCAP frame captured after it
  * shows the object within PLACE_POS and PLACE_YAW of the pose, at most --place-wait s. The
  * sphere must keep PLACE_CLEAR from the placed object's sides (the planner's release). */
@@ -127,6 +132,8 @@ typedef struct {
   int no_record;      /* the next task is not recorded: the object was not at rest */
   int robot_stopped;  /* the newest ROBOT_STATE said STOPPED (1) or not (0); -1 before one */
   int stops_between;  /* reflex stops that began while no task ran (a release, idle) */
+  double cmd_moving_at; /* ndp_mono() of the newest EE_CMD not HOLDING; -inf before one */
+  int have_cmd;         /* an EE_CMD has arrived */
 } tasks_io;
 
 /* How one task ended. */
@@ -173,8 +180,9 @@ int tasks_pause(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int err
  * until MOCAP shows it there. 1 if it is, 0 if not within c->place_wait (or interrupted),
  * -1 with a message on an LCM failure. */
 int tasks_place(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, int64_t id, char *err, int errlen);
-/* Before a task: wait c->settle s, then until the object is at rest (at most SETTLE_MAX);
- * if it is not, say so and set io->no_record. 0, or -1 with a message on an LCM failure. */
+/* Before a task: wait c->settle s, then until the object is at rest and the commands have
+ * held the sphere for SETTLE_CMD_REST (at most SETTLE_MAX); if not, say so and set
+ * io->no_record. 0, or -1 with a message on an LCM failure. */
 int tasks_settle(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int errlen);
 
 #endif
