@@ -85,7 +85,6 @@ static void use_robot_state(void *user, const nudge_robot_state_t *m) {
 static void use_ee_cmd(void *user, const nudge_ee_cmd_t *m) {
   tasks_io *io = user;
   io->st.received++;
-  io->have_cmd = 1;
   if (m->mode != NUDGE_EE_CMD_T_MODE_HOLDING) io->cmd_moving_at = ndp_mono();
   if (io->run.id >= 0) {
     const double v = hypot(m->v[0], m->v[1]);

@@ -293,7 +293,7 @@ int tasks_settle(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int er
       speed = frame_speed(&io->last, &ref);
       ref = io->last;
     }
-    const int held = !io->have_cmd || now - io->cmd_moving_at >= SETTLE_CMD_REST;
+    const int held = now - io->cmd_moving_at >= SETTLE_CMD_REST;  /* -inf: none moved it */
     if (now - t0 >= c->settle && speed < REST_SPEED && held) return 0;
     if (now - t0 >= fmax(c->settle, SETTLE_MAX)) break;
     if (tasks_pump(lcm, io, 0.02, err, errlen)) return -1;
