@@ -185,12 +185,13 @@ static double release_clear(planner_proc *p, double now) {
   return placing(p, now) ? fmax(c, p->place.clear + PLANNER_PLACE_EXTRA) : c;
 }
 
-/* The rest point key[2] release_clear of b from the sphere's measured position, in the
- * keypoint box; return how far it moves the sphere (m). */
-static double release_key(planner_proc *p, double now, const nd_release_box *b, double key[2]) {
+/* The rest point key[2] release_clear of b from the sphere at from[2], in the keypoint
+ * box; return how far it moves the sphere (m). */
+static double release_key(planner_proc *p, double now, const nd_release_box *b,
+                          const double from[2], double key[2]) {
   const nds_planner_cfg *pc = nds_planner_config(p->planner);
-  return nd_release_target(b, p->ee_radius, release_clear(p, now), p->rs.ee_pos, pc->ws_lo,
-                           pc->ws_hi, key);
+  return nd_release_target(b, p->ee_radius, release_clear(p, now), from, pc->ws_lo, pc->ws_hi,
+                           key);
 }
 
 /* Publish the PLAN that rests the sphere at key[2] (the object b predicted to stay); renew:
@@ -228,7 +229,7 @@ int planner_release(planner_proc *p, double now, char *err, int errlen) {
   p->release_due = 0;
   const nd_release_box b = release_box(p, now);
   double key[2];
-  const double moved = release_key(p, now, &b, key);
+  const double moved = release_key(p, now, &b, p->rs.ee_pos, key);
   if (publish_release(p, now, &b, key, 0, err, errlen)) return -1;
   p->keep_clear = o->release > 0.0;
   fprintf(stderr, PROG ": task %lld: released: the sphere rests at (%+.3f, %+.3f) m, %.1f mm "
@@ -250,7 +251,7 @@ int planner_keep_clear(planner_proc *p, double now, char *err, int errlen) {
   const double gap = nd_release_gap(&b, p->ee_radius, p->rs.ee_pos, n);
   if (gap >= PLANNER_RECLEAR * release_clear(p, now)) return 0;
   double key[2];
-  const double moved = release_key(p, now, &b, key);
+  const double moved = release_key(p, now, &b, p->rs.ee_pos, key);
   if (moved < PLANNER_RECLEAR_MIN) {
     p->keep_clear = 0;
     fprintf(stderr, PROG ": task %lld: the object is %.1f mm from the sphere, which the keypoint "
@@ -269,13 +270,17 @@ int planner_place(planner_proc *p, double now, char *err, int errlen) {
   if (!release_sensed(p, now)) return 0;
   p->place_due = 0;
   const nd_release_box b = release_box(p, now);
+  /* A release on its way rests the sphere at its key, not where it is now: a key clear of
+   * the old pose may lie in the placed object, which the bridge puts there the moment the
+   * sphere passes clear of it. */
+  const double *from = now < p->release_until ? p->release_key : p->rs.ee_pos;
   double key[2];
-  const double moved = release_key(p, now, &b, key);
+  const double moved = release_key(p, now, &b, from, key);
   if (moved > 0.0 && publish_release(p, now, &b, key, 0, err, errlen)) return -1;
   p->keep_clear = 1;
   fprintf(stderr, PROG ": PLACE %lld at (%+.3f, %+.3f) m: the sphere %s (%+.3f, %+.3f) m, %.1f "
           "mm out, at least %g m clear of it\n", (long long)p->place.place_id, b.x, b.y,
-          moved > 0.0 ? "rests at" : "stays at", key[0], key[1], 1e3 * moved,
+          moved > 0.0 || from != p->rs.ee_pos ? "rests at" : "stays at", key[0], key[1], 1e3 * moved,
           release_clear(p, now));
   return 0;
 }
