@@ -59,7 +59,7 @@ int main(int argc, char **argv) {
   for (int i = 0; i < cfg.n && !ndp_quit; i++) {
     tasks_result r;
     if (cfg.place) {
-      const int pl = tasks_place(lcm, &io, &cfg, id0 + i, err, sizeof(err));
+      const int pl = tasks_place(lcm, &io, &cfg, err, sizeof(err));
       if (pl < 0) goto done;
       if (pl == 0 && !ndp_quit) {
         snprintf(err, sizeof(err), "--place: the object was not at (%g, %g) m, yaw %g rad "
@@ -68,8 +68,9 @@ int main(int argc, char **argv) {
                  cfg.place_pose.y, cfg.place_pose.yaw, cfg.place_wait, NDP_CH_PLACE, PLACE_CLEAR);
         goto done;
       }
+    } else if (tasks_settle(lcm, &io, &cfg, err, sizeof(err))) {
+      goto done;
     }
-    if (tasks_settle(lcm, &io, &cfg, err, sizeof(err))) goto done;
     if (ndp_quit) break;
     if (tasks_run(lcm, &io, &cfg, &cfg.goals[i], id0 + i, &r, err, sizeof(err))) goto done;
     tasks_print(i, cfg.n, &cfg.goals[i], &r);

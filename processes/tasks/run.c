@@ -241,20 +241,26 @@ static double frame_speed(const nudge_mocap_t *a, const nudge_mocap_t *b) {
   return fmax(d, REST_ARM * dyaw) / dt;
 }
 
-int tasks_place(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, int64_t id, char *err, int errlen) {
+/* 1 if the newest frame shows the object within PLACE_POS and PLACE_YAW of g. */
+static int at_pose(const tasks_io *io, const nd_goal *g) {
+  const nudge_mocap_t *f = &io->last;
+  return hypot(f->obj_pos[0] - g->x, f->obj_pos[1] - g->y) < PLACE_POS &&
+         yaw_error(nd_quat_yaw(f->obj_quat), g->yaw) < PLACE_YAW;
+}
+
+/* One PLACE, re-sent until a frame captured after it shows the object there: 1, or 0 past
+ * c->place_wait (or interrupted), -1 with a message on an LCM failure. */
+static int place_once(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int errlen) {
   io->st.state = "placing";
   const nd_goal *g = &c->place_pose;
-  const nudge_place_t m = {ndp_utime(), id, g->x, g->y, g->yaw, PLACE_CLEAR};
+  const int64_t now_us = ndp_utime();
+  const nudge_place_t m = {now_us, now_us, g->x, g->y, g->yaw, PLACE_CLEAR};
   const double t0 = ndp_mono();
   double sent = -INFINITY;
   int said = 0;
   while (!ndp_quit) {
     const double now = ndp_mono();
-    const nudge_mocap_t *f = &io->last;
-    if (io->frames > 0 && f->utime > m.utime &&
-        hypot(f->obj_pos[0] - g->x, f->obj_pos[1] - g->y) < PLACE_POS &&
-        yaw_error(nd_quat_yaw(f->obj_quat), g->yaw) < PLACE_YAW)
-      return 1;
+    if (io->frames > 0 && io->last.utime > m.utime && at_pose(io, g)) return 1;
     if (now - t0 >= c->place_wait) return 0;
     if (!said && now - t0 >= PLACE_SAY) {
       fprintf(stderr, PROG ": waiting for the object at (%g, %g) m, yaw %g rad (PLACE)\n", g->x,
@@ -272,6 +278,29 @@ int tasks_place(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, int64_t id, char *
     if (tasks_pump(lcm, io, 0.02, err, errlen)) return -1;
   }
   return 0;
+}
+
+int tasks_place(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int errlen) {
+  const nd_goal *g = &c->place_pose;
+  for (int k = 1;; k++) {
+    const int pl = place_once(lcm, io, c, err, errlen);
+    if (pl <= 0) return pl;
+    if (tasks_settle(lcm, io, c, err, errlen)) return -1;
+    if (ndp_quit || io->no_record || at_pose(io, g)) return 1;
+    const nudge_mocap_t *f = &io->last;
+    const double off = hypot(f->obj_pos[0] - g->x, f->obj_pos[1] - g->y);
+    const double dyaw = yaw_error(nd_quat_yaw(f->obj_quat), g->yaw);
+    if (k < PLACE_TRIES) {
+      fprintf(stderr, PROG ": the object was moved %.1f mm and %.3f rad off the placed pose "
+              "before the task: placing it again\n", 1e3 * off, dyaw);
+      continue;
+    }
+    io->no_record = io->buf != NULL;
+    fprintf(stderr, PROG ": the object was moved off the placed pose after each of %d "
+            "placements (%.1f mm, %.3f rad the last time)%s\n", PLACE_TRIES, 1e3 * off, dyaw,
+            io->buf ? ": the next task is not recorded (a record starts at the placed pose)" : "");
+    return 1;
+  }
 }
 
 int tasks_settle(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int errlen) {

@@ -55,6 +55,10 @@
 #define PLACE_YAW 0.05     /* rad */
 #define PLACE_CLEAR 0.01   /* m */
 #define PLACE_SAY 3.0      /* s: a placement not seen by then is announced (for a person) */
+/* A record assumes the object at the placed pose: one moved off it before the task (a
+ * sphere still on its way out, a hand) is placed again, at most PLACE_TRIES times. Each
+ * PLACE has a new place_id, the wall clock in us (ids only increase). */
+#define PLACE_TRIES 3
 
 /* What the runner was asked to do; constant once parsed. */
 typedef struct {
@@ -175,10 +179,11 @@ void tasks_print(int i, int n, const nd_goal *g, const tasks_result *r);
 const char *tasks_reflex_name(int reflex, int joint);
 /* After a task: await the fit of its record (--await-fit). */
 int tasks_pause(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int errlen);
-/* Before a task, with c->place: ask for the object at c->place_pose (PLACE, id) and wait
- * until MOCAP shows it there. 1 if it is, 0 if not within c->place_wait (or interrupted),
- * -1 with a message on an LCM failure. */
-int tasks_place(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, int64_t id, char *err, int errlen);
+/* Before a task, with c->place: ask for the object at c->place_pose (PLACE) and wait until
+ * MOCAP shows it there, then settle (tasks_settle); an object moved off the pose meanwhile
+ * is placed again, at most PLACE_TRIES times, then the task is not recorded. 1 if placed,
+ * 0 if not within c->place_wait (or interrupted), -1 with a message on an LCM failure. */
+int tasks_place(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int errlen);
 /* Before a task: wait c->settle s, then until the object is at rest and the commands have
  * held the sphere for SETTLE_CMD_REST (at most SETTLE_MAX); if not, say so and set
  * io->no_record. 0, or -1 with a message on an LCM failure. */

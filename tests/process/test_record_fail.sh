@@ -16,7 +16,9 @@
 # 1. disk full: a dummy file fills the tmpfs; two tasks;
 # 2. read-only: a copy of the seeded buffer behind a read-only bind mount; two tasks;
 # 3. read-only, then writable again: the mount turns read-write after the first task's
-#    failure; the second task's append reopens the file and is recorded.
+#    failure; the second task's append reopens the file and is recorded;
+# 4. placed, then moved: with --place the object is put at the origin; another PLACE moves it
+#    during the settle; the runner places it again, and the record starts at the origin.
 # In 1 and 2 nudge-tasks runs both goals to their end (both task lines and its summary),
 # says for every task it could not record which file and why (ENOSPC / EROFS, by name
 # and text), exits 3 and reports the failures as tasks_record_failed; the seeded records
@@ -205,6 +207,36 @@ pt_check "back: the runner reopened the buffer once it was writable" \
 pt_check "back: the buffer holds the seeded record and the new one" test "$(records "$ROBUF")" = 2
 pt_check "back: the seeded record's bytes are unchanged" \
   cmp -s -n "$size_before" "$BUF" "$ROBUF"
+
+# --- 4. placed, then moved before the task ----------------------------------------------
+# nudge-tasks --place puts the object at the origin, then settles for 4 s; a PLACE from
+# elsewhere (nudge-inject: a hand, or a sphere still on its way out) moves it meanwhile.
+# The runner sees it off the pose, places it again, and the record starts at the pose.
+PBUF=$RW/placed.nrb
+BLOG=$UP/bridge.log
+n_origin() { grep -c ': the object placed at (+0.000, +0.000) m, yaw +0.0 deg' "$BLOG"; }
+placed_once() { (($(n_origin) >= 1)); }
+pt_spawn TASKS_PID "$PT_BIN/nudge-tasks" --record "$PBUF" --eps 2.5e-3 --tau 2 --settle 4 \
+  --place 0,0,0 --goal 0.15,0,0 >"$PT_WORK/moved.out" 2>"$PT_WORK/moved.err"
+if pt_wait_for 20 placed_once; then
+  out=$("$PT_INJ" --place-at 0.03,0.02,0.3 2>&1) || pt_fail "nudge-inject --place-at failed: $out"
+else
+  pt_fail "moved: the bridge did not place the object at the origin within 20 s"
+fi
+finish moved
+cat "$PT_WORK/moved.out"
+grep -E 'placed pose|not recorded' "$PT_WORK/moved.err"
+pt_check "moved: nudge-tasks exits 0 (got $PT_RC)" test "$PT_RC" -eq 0
+pt_check "moved: the bridge moved the object to the other PLACE" \
+  grep -q ': the object placed at (+0.030, +0.020) m, yaw +17.2 deg' "$BLOG"
+pt_check "moved: the runner saw it off the pose and placed it again" \
+  grep -qE '^nudge-tasks: the object was moved [0-9.]+ mm and [0-9.]+ rad off the placed pose before the task: placing it again$' \
+  "$PT_WORK/moved.err"
+pt_check "moved: placed at the origin twice (got $(n_origin))" test "$(n_origin)" -eq 2
+pt_check "moved: the task was recorded ($(records "$PBUF") records)" test "$(records "$PBUF")" = 1
+pt_val o0 buffer "$PBUF" record_start_off_origin_max
+pt_check "moved: the record starts with the object at the origin (off by $o0 m)" \
+  awk -v o="$o0" 'BEGIN { exit !(o != "" && o < 0.005) }'
 
 # --- the system is unharmed --------------------------------------------------------------
 pt_up_stop "$up" 30

@@ -52,6 +52,8 @@ typedef struct {
   int workspace;       /* the valid-but-outside kind (PLAN, EE_CMD only) */
   int plan_to;         /* valid PLANs to `to` (PLAN only) */
   double to[2];
+  int place_at;        /* one valid PLACE at `at` (PLACE only): the object bumped there */
+  double at[3];
   int repeat;
   double gap_s;        /* pause after each message */
   uint64_t seed;
@@ -373,6 +375,12 @@ static void inject_place(inj *j) {
   PLACE_BAD(m.place_id = -2);
   PLACE_BAD(m.utime = 0);
 #undef PLACE_BAD
+  if (j->o->place_at) {
+    m = ok;
+    m.utime = m.place_id = wall_us();  /* a new placement: ids only increase */
+    m.x = j->o->at[0], m.y = j->o->at[1], m.yaw = j->o->at[2];
+    send_ws(j, nudge_place_t_encode(j->buf, 0, MAX_MSG, &m));
+  }
   if (j->o->garbage) {
     m = ok;
     send_garbage(j, j->buf, nudge_place_t_encode(j->buf, 0, MAX_MSG, &m));
@@ -480,6 +488,8 @@ static void usage(FILE *f) {
           "                  and EE_CMD outside the default workspace (at (0.8, 0))\n"
           "  --plan-to X,Y   instead: valid PLANs to (X, Y), on PLAN only (with --repeat\n"
           "                  and --gap-ms: a stream the executor follows)\n"
+          "  --place-at X,Y,YAW  instead: one valid PLACE there, on PLACE only (an emulating\n"
+          "                  bridge puts the object there: a bump between tasks)\n"
           "  --repeat N      send everything N times, 1..10000 (default 1)\n"
           "  --gap-ms MS     pause after each message, 0..1000 ms (default 1)\n"
           "  --seed N        seed of the random garbage (default 1)\n"
@@ -512,7 +522,7 @@ static int parse_args(int argc, char **argv, inj_opts *o) {
     }
     if (strcmp(a, "--channel") && strcmp(a, "--kind") && strcmp(a, "--repeat") &&
         strcmp(a, "--gap-ms") && strcmp(a, "--seed") && strcmp(a, "--lcm-url") &&
-        strcmp(a, "--plan-to")) {
+        strcmp(a, "--plan-to") && strcmp(a, "--place-at")) {
       snprintf(err, sizeof err, "unknown argument '%s'", a);
       return bad_arg(err);
     }
@@ -539,6 +549,10 @@ static int parse_args(int argc, char **argv, inj_opts *o) {
       if (nd_parse_list(v, a, 2, -1.0, 1.0, o->to, err, sizeof err)) return bad_arg(err);
       o->bad = o->garbage = 0, o->plan_to = 1;
       o->on[CH_PLAN] = 1, any = 1;
+    } else if (!strcmp(a, "--place-at")) {
+      if (nd_parse_list(v, a, 3, -3.2, 3.2, o->at, err, sizeof err)) return bad_arg(err);
+      o->bad = o->garbage = 0, o->place_at = 1;
+      o->on[CH_PLACE] = 1, any = 1;
     } else if (!strcmp(a, "--repeat")) {
       if (nd_parse_int(v, a, 1, 10000, &o->repeat, err, sizeof err)) return bad_arg(err);
     } else if (!strcmp(a, "--gap-ms")) {
