@@ -155,8 +155,8 @@ void bridge_io_report(bridge_io *io, uint64_t *version, const nd_rtloop_stats *l
               1e3 * r->place_gap);
     else
       fprintf(stderr, PROG ": PLACE %lld dropped: the sphere stayed %.1f mm from the object's "
-              "sides at (%+.3f, %+.3f) m for %g s\n", (long long)r->place_id, 1e3 * r->place_gap,
-              p[0], p[1], NUDGE_PLACE_T_WAIT);
+              "sides at (%+.3f, %+.3f) m for %g s (a place needs it clear and at rest)\n",
+              (long long)r->place_id, 1e3 * r->place_gap, p[0], p[1], NUDGE_PLACE_T_WAIT);
     io->places_said = r->places;
     io->dropped_said = r->places_dropped;
   }

@@ -179,16 +179,20 @@ static void put_arm(bridge_loop *b, const nds_world_robot *r, int64_t utime) {
   b->arm_seq++;
 }
 
-/* The newest PLACE, applied once the sphere is its clear from the pose, or dropped after
- * NUDGE_PLACE_T_WAIT. 1 when the report has news. */
-static int place(bridge_loop *b, double now) {
+/* The newest PLACE, applied once the sphere and this step's setpoint sp are at rest and
+ * the sphere is its clear from the pose, or dropped after NUDGE_PLACE_T_WAIT. 1 when the
+ * report has news. */
+static int place(bridge_loop *b, double now, const double sp[2][4]) {
   bridge_place pl;
   if (nd_mailbox_take(&b->place, &b->pl_version, &pl, sizeof(pl)) == (int)sizeof(pl))
     b->pl = pl, b->pl_pending = 1;
   if (!b->pl_pending) return 0;
+  const int rest = b->ee_speed < BRIDGE_PLACE_REST &&
+                   hypot(sp[0][ND_V], sp[1][ND_V]) < BRIDGE_PLACE_REST;
+  if (!rest && now - b->pl.arrival < NUDGE_PLACE_T_WAIT) return 0;
   const double *p = b->pl.pose;
-  const double gap = nds_world_place(b->world, p[0], p[1], p[2], b->pl.clear);
-  const int placed = gap >= b->pl.clear;
+  const double gap = nds_world_place(b->world, p[0], p[1], p[2], rest ? b->pl.clear : INFINITY);
+  const int placed = gap >= b->pl.clear && rest;
   if (!placed && now - b->pl.arrival < NUDGE_PLACE_T_WAIT) return 0;
   b->pl_pending = 0;
   if (placed) b->rep.places++;
@@ -201,8 +205,8 @@ static int place(bridge_loop *b, double now) {
 
 void bridge_loop_step(bridge_loop *b, double now, int64_t utime) {
   double sp[2][4];
-  int post = place(b, now);
-  post |= setpoint(b, now, utime, sp);
+  int post = setpoint(b, now, utime, sp);
+  post |= place(b, now, sp);
   const uint64_t req = atomic_load_explicit(&b->resume_req, memory_order_relaxed);
   if (req != b->resume_seen) {  /* a new task: a stopped arm tracks again */
     b->resume_seen = req;
@@ -214,6 +218,7 @@ void bridge_loop_step(bridge_loop *b, double now, int64_t utime) {
     b->rep.resets++;
     if (b->holding) nds_world_ee(b->world, b->hold);
   }
+  b->ee_speed = hypot(out.robot.ee_vel[0], out.robot.ee_vel[1]);
   if (out.robot.stopped != b->rep.stopped) {
     b->rep.stopped = out.robot.stopped;
     b->rep.stops += out.stopped_now;

@@ -103,6 +103,11 @@ typedef struct {
 
 #define BRIDGE_LOOP_REPORT_STEPS 100
 
+/* A PLACE also waits for the sphere and its command at rest (under BRIDGE_PLACE_REST), as an
+ * operator waits for the arm to stop: a sphere passing clear of the pose on its way may
+ * come back through it. */
+#define BRIDGE_PLACE_REST 0.01  /* m/s */
+
 #define BRIDGE_LOOP_ARM_STEPS 20  /* ARM_STATE every 20 steps: 50 Hz, for drawing */
 
 enum { BRIDGE_TAG_ROBOT_STATE = 0, BRIDGE_TAG_MOCAP = 1, BRIDGE_TAG_ARM_STATE = 2 };
@@ -134,6 +139,7 @@ typedef struct {
   int have_cmd, holding;
   double hold[2];
   double sp_last[2];   /* the setpoint position of the last step */
+  double ee_speed;     /* the sphere's speed after the last step, m/s */
   uint64_t resume_seen;
   int64_t rs_seq, mc_seq, arm_seq;
   bridge_report rep;
