@@ -64,7 +64,7 @@ int main(int argc, char **argv) {
       if (pl == 0 && !ndp_quit) {
         snprintf(err, sizeof(err), "--place: the object was not at (%g, %g) m, yaw %g rad "
                  "within %g s of asking on %s (nudge-bridge puts it there once the sphere is %g "
-                 "m clear; on a robot, put it there by hand)", cfg.place_pose.x,
+                 "m clear and at rest; on a robot, put it there by hand)", cfg.place_pose.x,
                  cfg.place_pose.y, cfg.place_pose.yaw, cfg.place_wait, NDP_CH_PLACE, PLACE_CLEAR);
         goto done;
       }
