@@ -172,6 +172,7 @@ void nds_planner_cfg_fit_limits(nds_planner_cfg *cfg) {
   cfg->key_v_max = fmin(cfg->key_v_max, cfg->v_max / sqrt(2.0));
   cfg->std_init[2] = fmin(cfg->std_init[2], 0.25 * cfg->v_max);
   cfg->std_init[3] = fmin(cfg->std_init[3], 0.25 * cfg->v_max);
+  cfg->T = fmax(cfg->T, fmin(NDS_PLANNER_REACH / cfg->v_max, NDS_PLANNER_T_MAX));
 }
 
 /* A candidate's relative excess over the limits, 0 within them; *cart and *arm say which
@@ -377,6 +378,7 @@ int nds_planner_set_v_max(nds_planner *p, double v_max, char *err, int errlen) {
     nds_planner_cfg_fit_limits(&c);
   }
   p->cfg.v_max = c.v_max;
+  p->cfg.T = c.T;
   p->cfg.key_v_max = c.key_v_max;
   memcpy(p->cfg.std_init, c.std_init, sizeof(c.std_init));
   sampler_bounds(p);

@@ -73,8 +73,15 @@ int nds_planner_set_theta(nds_planner *p, const double theta[ND_NTHETA], char *e
 /* Fit the sampler to cfg's v_max: keypoint velocities within v_max / sqrt 2 per axis (so
  * within v_max together) and a velocity spread of at most v_max / 4. Unchanged at the
  * default limits; at the lab's 0.45 m/s most candidates were beyond them otherwise
- * (doc/decisions.md#skip-infeasible). */
+ * (doc/decisions.md#skip-infeasible). Segments last at least NDS_PLANNER_REACH / v_max
+ * (at most NDS_PLANNER_T_MAX). */
 void nds_planner_cfg_fit_limits(nds_planner_cfg *cfg);
+
+/* A horizon must see the sphere round the object to where a push starts: at a slow task's
+ * limit a segment lasts long enough to move it NDS_PLANNER_REACH. At 0.15 m/s the 0.3 s
+ * segments saw 4.5 cm, and a sphere on the goal's side stayed put (doc/decisions.md#slow-reach). */
+#define NDS_PLANNER_REACH 0.15  /* m */
+#define NDS_PLANNER_T_MAX 1.0   /* s */
 
 /* The configuration the planner runs with. */
 const nds_planner_cfg *nds_planner_config(const nds_planner *p);

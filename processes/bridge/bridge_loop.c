@@ -191,6 +191,7 @@ static int place(bridge_loop *b, double now, const double sp[2][4]) {
                    hypot(sp[0][ND_V], sp[1][ND_V]) < BRIDGE_PLACE_REST;
   if (!rest && now - b->pl.arrival < NUDGE_PLACE_T_WAIT) return 0;
   const double *p = b->pl.pose;
+  /* Not at rest: only the gap, for the report (an infinite clear places nothing). */
   const double gap = nds_world_place(b->world, p[0], p[1], p[2], rest ? b->pl.clear : INFINITY);
   const int placed = gap >= b->pl.clear && rest;
   if (!placed && now - b->pl.arrival < NUDGE_PLACE_T_WAIT) return 0;

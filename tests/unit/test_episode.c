@@ -272,8 +272,9 @@ static double plan_peak_speed(const nds_plan *pl, const double sp0[2][4]) {
 }
 
 /* A speed limit set on a running planner (a task's own, nudge-tasks --v-max) plans as a
- * planner created with it: same keypoints from the same seed, within the limit; 0 restores
- * the created limit and sampler; a limit that is not a speed is refused. */
+ * planner created with it: same keypoints from the same seed, within the limit, on segments
+ * long enough to move the sphere NDS_PLANNER_REACH; 0 restores the created limit, sampler
+ * and segment time; a limit that is not a speed is refused. */
 static void test_speed_limit(void **state) {
   fixture *f = *state;
   const nd_goal g = {.x = 0.10, .y = 0.05, .yaw = 0.3};
@@ -298,6 +299,9 @@ static void test_speed_limit(void **state) {
   assert_true(nds_planner_config(a)->v_max == 0.2);
   assert_true(nds_planner_config(a)->key_v_max == slow.key_v_max);
   assert_true(nds_planner_config(a)->std_init[2] == slow.std_init[2]);
+  /* Segments long enough to move the sphere NDS_PLANNER_REACH at 0.2 m/s. */
+  assert_near(nds_planner_config(a)->T, fmax(base.T, NDS_PLANNER_REACH / 0.2), 1e-12);
+  assert_true(nds_planner_config(a)->T > base.T);
   nds_planner_free(a);
   /* Fresh, so both draw from the same seed: set the limit before the first plan. */
   a = nds_planner_create(&f->plan, &base, f->pool, err, sizeof(err));
@@ -316,6 +320,7 @@ static void test_speed_limit(void **state) {
   assert_int_equal(nds_planner_set_v_max(a, 0.0, err, sizeof(err)), 0);
   assert_true(nds_planner_config(a)->v_max == base.v_max);
   assert_true(nds_planner_config(a)->key_v_max == base.key_v_max);
+  assert_true(nds_planner_config(a)->T == base.T);
   assert_int_equal(nds_planner_set_v_max(a, 5.0 * base.v_max, err, sizeof(err)), 0);
   assert_true(nds_planner_config(a)->v_max == base.v_max);
   assert_int_equal(nds_planner_set_v_max(a, -0.1, err, sizeof(err)), -1);
