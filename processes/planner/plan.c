@@ -273,14 +273,15 @@ int planner_place(planner_proc *p, double now, char *err, int errlen) {
   /* A release on its way rests the sphere at its key, not where it is now, and a key clear
    * of the object's old pose may lie in the placed one: the rest point is found from there,
    * one move rather than a move and a re-clear. */
-  const double *from = now < p->release_until ? p->release_key : p->rs.ee_pos;
+  const int in_flight = now < p->release_until;
+  const double *from = in_flight ? p->release_key : p->rs.ee_pos;
   double key[2];
   const double moved = release_key(p, now, &b, from, key);
   if (moved > 0.0 && publish_release(p, now, &b, key, 0, err, errlen)) return -1;
   p->keep_clear = 1;
   fprintf(stderr, PROG ": PLACE %lld at (%+.3f, %+.3f) m: the sphere %s (%+.3f, %+.3f) m, %.1f "
           "mm out, at least %g m clear of it\n", (long long)p->place.place_id, b.x, b.y,
-          moved > 0.0 || from != p->rs.ee_pos ? "rests at" : "stays at", key[0], key[1],
+          moved > 0.0 || in_flight ? "rests at" : "stays at", key[0], key[1],
           1e3 * moved, release_clear(p, now));
   return 0;
 }

@@ -12,13 +12,17 @@ static double yaw_error(double yaw, double goal_yaw) {
   return e > 0.5 * ND_PI ? ND_PI - e : e;
 }
 
+/* The newest frame's position (m) and yaw (rad) errors against pose g. */
+static void pose_error(const tasks_io *io, const nd_goal *g, double *pos, double *yaw) {
+  *pos = hypot(io->last.obj_pos[0] - g->x, io->last.obj_pos[1] - g->y);
+  *yaw = yaw_error(nd_quat_yaw(io->last.obj_quat), g->yaw);
+}
+
 /* Errors of the newest frame against goal g. */
 static void measure(const tasks_io *io, const nd_cost_weights *w, const nd_goal *g,
                     tasks_result *r) {
-  const double yaw = nd_quat_yaw(io->last.obj_quat);
-  r->task_error = nd_task_error(w, g, io->last.obj_pos, yaw);
-  r->pos_err = hypot(io->last.obj_pos[0] - g->x, io->last.obj_pos[1] - g->y);
-  r->yaw_err = yaw_error(yaw, g->yaw);
+  r->task_error = nd_task_error(w, g, io->last.obj_pos, nd_quat_yaw(io->last.obj_quat));
+  pose_error(io, g, &r->pos_err, &r->yaw_err);
 }
 
 static int publish_episode(lcm_t *lcm, tasks_io *io, int64_t task_id, int event,
@@ -243,9 +247,9 @@ static double frame_speed(const nudge_mocap_t *a, const nudge_mocap_t *b) {
 
 /* 1 if the newest frame shows the object within PLACE_POS and PLACE_YAW of g. */
 static int at_pose(const tasks_io *io, const nd_goal *g) {
-  const nudge_mocap_t *f = &io->last;
-  return hypot(f->obj_pos[0] - g->x, f->obj_pos[1] - g->y) < PLACE_POS &&
-         yaw_error(nd_quat_yaw(f->obj_quat), g->yaw) < PLACE_YAW;
+  double pos, yaw;
+  pose_error(io, g, &pos, &yaw);
+  return pos < PLACE_POS && yaw < PLACE_YAW;
 }
 
 /* One PLACE, re-sent until a frame captured after it shows the object there: 1, or 0 past
@@ -282,25 +286,22 @@ static int place_once(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, i
 
 int tasks_place(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int errlen) {
   const nd_goal *g = &c->place_pose;
-  for (int k = 1;; k++) {
+  double pos = 0.0, yaw = 0.0;
+  for (int k = 0; k < PLACE_TRIES; k++) {
+    if (k > 0)
+      fprintf(stderr, PROG ": the object was moved %.1f mm and %.3f rad off the placed pose "
+              "before the task: placing it again\n", 1e3 * pos, yaw);
     const int pl = place_once(lcm, io, c, err, errlen);
     if (pl <= 0) return pl;
     if (tasks_settle(lcm, io, c, err, errlen)) return -1;
     if (ndp_quit || io->no_record || at_pose(io, g)) return 1;
-    const nudge_mocap_t *f = &io->last;
-    const double off = hypot(f->obj_pos[0] - g->x, f->obj_pos[1] - g->y);
-    const double dyaw = yaw_error(nd_quat_yaw(f->obj_quat), g->yaw);
-    if (k < PLACE_TRIES) {
-      fprintf(stderr, PROG ": the object was moved %.1f mm and %.3f rad off the placed pose "
-              "before the task: placing it again\n", 1e3 * off, dyaw);
-      continue;
-    }
-    io->no_record = io->buf != NULL;
-    fprintf(stderr, PROG ": the object was moved off the placed pose after each of %d "
-            "placements (%.1f mm, %.3f rad the last time)%s\n", PLACE_TRIES, 1e3 * off, dyaw,
-            io->buf ? ": the next task is not recorded (a record starts at the placed pose)" : "");
-    return 1;
+    pose_error(io, g, &pos, &yaw);
   }
+  io->no_record = io->buf != NULL;
+  fprintf(stderr, PROG ": the object was moved off the placed pose after each of %d "
+          "placements (%.1f mm, %.3f rad the last time)%s\n", PLACE_TRIES, 1e3 * pos, yaw,
+          io->buf ? ": the next task is not recorded (a record starts at the placed pose)" : "");
+  return 1;
 }
 
 int tasks_settle(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int errlen) {
