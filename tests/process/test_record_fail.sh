@@ -18,7 +18,9 @@
 # 3. read-only, then writable again: the mount turns read-write after the first task's
 #    failure; the second task's append reopens the file and is recorded;
 # 4. placed, then moved: with --place the object is put at the origin; another PLACE moves it
-#    during the settle; the runner places it again, and the record starts at the origin.
+#    during the settle; the runner places it again, and the record starts at the origin;
+# 5. moved after every placement: the runner gives up after its 3 placements and runs the
+#    task from where the object lies, unrecorded.
 # In 1 and 2 nudge-tasks runs both goals to their end (both task lines and its summary),
 # says for every task it could not record which file and why (ENOSPC / EROFS, by name
 # and text), exits 3 and reports the failures as tasks_record_failed; the seeded records
@@ -237,6 +239,37 @@ pt_check "moved: the task was recorded ($(records "$PBUF") records)" test "$(rec
 pt_val o0 buffer "$PBUF" record_start_off_origin_max
 pt_check "moved: the record starts with the object at the origin (off by $o0 m)" \
   awk -v o="$o0" 'BEGIN { exit !(o != "" && o < 0.005) }'
+
+# --- 5. moved after every placement ----------------------------------------------------
+# The runner places the object at most 3 times (PLACE_TRIES). Moved off the pose after each,
+# the task still runs, from where the object lies, but is not recorded: a record starts at
+# the placed pose.
+n0=$(n_origin)
+k=0
+placed_k() { (($(n_origin) >= n0 + k)); }
+pt_spawn TASKS_PID "$PT_BIN/nudge-tasks" --record "$PBUF" --eps 2.5e-3 --tau 2 --settle 4 \
+  --place 0,0,0 --goal 0.15,0,0 >"$PT_WORK/moved3.out" 2>"$PT_WORK/moved3.err"
+for k in 1 2 3; do
+  if ! pt_wait_for 20 placed_k; then
+    pt_fail "moved3: the bridge did not place the object at the origin a ${k}th time within 20 s"
+    break
+  fi
+  out=$("$PT_INJ" --place-at -0.03,0.02,-0.3 2>&1) || pt_fail "nudge-inject --place-at failed: $out"
+done
+finish moved3
+cat "$PT_WORK/moved3.out"
+grep -E 'placed pose|not recorded' "$PT_WORK/moved3.err"
+pt_check "moved3: nudge-tasks exits 0 (got $PT_RC)" test "$PT_RC" -eq 0
+pt_check "moved3: placed at the origin 3 more times (got $(($(n_origin) - n0)))" \
+  test "$(($(n_origin) - n0))" -eq 3
+pt_check "moved3: the runner gave up after 3 placements and said the task goes unrecorded" \
+  grep -qE '^nudge-tasks: the object was moved off the placed pose after each of 3 placements \([0-9.]+ mm, [0-9.]+ rad the last time\): the next task is not recorded \(a record starts at the placed pose\)$' \
+  "$PT_WORK/moved3.err"
+pt_check "moved3: the task ran all the same" grep -q '^task 1/1 goal (+0.15, +0.00, +0.0 deg): ' \
+  "$PT_WORK/moved3.out"
+pt_check "moved3: tasks_recorded 0" test "$(figure tasks_recorded "$PT_WORK/moved3.out")" = 0
+pt_check "moved3: the buffer still holds the one record of section 4 (got $(records "$PBUF"))" \
+  test "$(records "$PBUF")" = 1
 
 # --- the system is unharmed --------------------------------------------------------------
 pt_up_stop "$up" 30
