@@ -251,7 +251,7 @@ pt_spawn TASKS_PID "$PT_BIN/nudge-tasks" --record "$PBUF" --eps 2.5e-3 --tau 2 -
   --place 0,0,0 --goal 0.15,0,0 >"$PT_WORK/moved3.out" 2>"$PT_WORK/moved3.err"
 for k in 1 2 3; do
   if ! pt_wait_for 20 placed_k; then
-    pt_fail "moved3: the bridge did not place the object at the origin a ${k}th time within 20 s"
+    pt_fail "moved3: the bridge did not make placement $k of 3 at the origin within 20 s"
     break
   fi
   out=$("$PT_INJ" --place-at -0.03,0.02,-0.3 2>&1) || pt_fail "nudge-inject --place-at failed: $out"
