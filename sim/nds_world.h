@@ -105,7 +105,8 @@ void nds_world_ee(const nds_world *w, double ee[2]);
  * is reset to its start. Allocation-free. */
 void nds_world_step(nds_world *w, const double sp[2][4], nds_world_out *out);
 
-/* Release a stopped arm (the next task): it tracks setpoints again, from where it stopped. */
+/* Release a stopped arm (the next task or PLACE): it tracks setpoints again, from where it
+ * stopped. */
 void nds_world_resume(nds_world *w);
 
 /* A new motion begins (commands after a hold, or a hold after commands): the reflexes

@@ -72,7 +72,9 @@ static void use_task(void *user, const nudge_task_t *msg) {
 }
 
 /* A PLACE goes to the loop once per place_id (it is re-sent until the object is seen
- * there). */
+ * there). A new one also releases an arm a reflex stopped, as a new task does: resetting
+ * the scene acknowledges the error, and the sphere has to move clear of the pose before
+ * the object can be put there. */
 static void use_place(void *user, const nudge_place_t *msg) {
   bridge_io *io = user;
   io->st.received++;
@@ -80,6 +82,7 @@ static void use_place(void *user, const nudge_place_t *msg) {
   io->place_id = msg->place_id;
   const bridge_place pl = {msg->place_id, {msg->x, msg->y, msg->yaw}, msg->clear, ndp_mono()};
   nd_mailbox_post(&io->b->place, &pl, sizeof(pl));
+  atomic_fetch_add(&io->b->resume_req, 1);
 }
 
 NDP_INPUT(nudge_ee_cmd_t, ndp_check_ee_cmd, on_ee_cmd_raw, use_ee_cmd, refuse)
@@ -166,7 +169,7 @@ void bridge_io_report(bridge_io *io, uint64_t *version, const nd_rtloop_stats *l
     const bridge_sample *sa = r->stop_sample;
     static const char *const how[4] = {"held", "Taylor", "future", "future of the one before"};
     fprintf(stderr, PROG ": the robot stopped: %s %.4g beyond its limit %.4g; braking until the "
-            "next task (%lld stops); setpoint sampled from EE_CMD %lld (%s) %.2f ms after its "
+            "next task or PLACE (%lld stops); setpoint sampled from EE_CMD %lld (%s) %.2f ms after its "
             "time, the newest arrived %.2f ms before%s; the step before: EE_CMD %lld (%s) %.2f "
             "ms, %.2f ms%s\n", nds_panda_reflex_name(x, name, sizeof(name)), x->value, x->limit,
             (long long)r->stops, (long long)sa[0].cmd_seq, how[sa[0].how & 3], 1e3 * sa[0].h,

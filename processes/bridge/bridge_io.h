@@ -47,8 +47,8 @@ typedef struct {
  * printed). */
 int bridge_options(int argc, char **argv, bridge_opts *o);
 
-/* Subscribe EE_CMD, TASK (a new task resumes a stopped arm) and PLACE. Return 0, or -1 with a
- * message. */
+/* Subscribe EE_CMD, TASK and PLACE (a new task or PLACE resumes a stopped arm). Return 0, or
+ * -1 with a message. */
 int bridge_io_subscribe(bridge_io *io, lcm_t *lcm, char *err, int errlen);
 
 /* Publish what the loop encoded. Return the number of failed publishes. */

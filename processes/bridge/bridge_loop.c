@@ -209,7 +209,7 @@ void bridge_loop_step(bridge_loop *b, double now, int64_t utime) {
   int post = setpoint(b, now, utime, sp);
   post |= place(b, now, sp);
   const uint64_t req = atomic_load_explicit(&b->resume_req, memory_order_relaxed);
-  if (req != b->resume_seen) {  /* a new task: a stopped arm tracks again */
+  if (req != b->resume_seen) {  /* a new task or PLACE: a stopped arm tracks again */
     b->resume_seen = req;
     nds_world_resume(b->world);
   }

@@ -119,7 +119,8 @@ typedef struct {
   nd_mailbox place;    /* I/O -> loop: the newest PLACE */
   nd_mailbox report;   /* loop -> I/O */
   nd_ring out;         /* loop -> I/O: encoded ROBOT_STATE / MOCAP / ARM_STATE */
-  atomic_uint_fast64_t resume_req;  /* I/O -> loop: +1 per new task (a stopped arm resumes) */
+  atomic_uint_fast64_t resume_req;  /* I/O -> loop: +1 per new task or PLACE (a stopped arm
+                                     * resumes) */
   /* the loop thread's own */
   bridge_cmd last, prev; /* the newest command, and the newest one whose time a step has
                           * reached (the one before it, unless it is ahead of the steps) */

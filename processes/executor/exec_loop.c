@@ -49,8 +49,8 @@ int exec_loop_cycle(exec_loop *s, double now, int64_t utime) {
       dirty = 1;
     }
     s->t_state = st.t_arrive;
-    /* A stopped robot brakes where it is and waits for the next task: the setpoint stays
-     * on it (so it resumes without a jump) and no plan is followed until a fresh one. */
+    /* A stopped robot brakes where it is and waits for the next task or PLACE: the setpoint
+     * stays on it (so it resumes without a jump) and no plan is followed until a fresh one. */
     if (st.stopped && (!s->stopped || hypot(st.ee_pos[0] - s->stop_pos[0],
                                             st.ee_pos[1] - s->stop_pos[1]) > EXEC_LOOP_STOP_STEP)) {
       nd_exec_init(&s->ex, st.ee_pos, now);

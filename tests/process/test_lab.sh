@@ -16,7 +16,9 @@
 #    reflex's name. The next task resumes the arm (ROBOT_STATE tracks again) and runs
 #    (from the stretched pose the reflex left, it may stop on one of its own: counted too).
 #    Then plans out of reach while the runner waits between two tasks: the arm stops with
-#    no task running, and the runner counts it as reflex_stops_between and names it.
+#    no task running, and the runner counts it as reflex_stops_between and names it. Then
+#    a stop with no task to come, and a PLACE of the object onto the stopped sphere: the
+#    PLACE resumes the arm, the planner moves the sphere clear, the object is put there.
 # 3. nudge-up demo --world lab on the lab goal chain: all five tasks run, every stop is
 #    reported (the runner's reflex_stops equals its stopped tasks; the bridge logged at
 #    least as many as the runner counted in tasks and between them), the run stops
@@ -125,6 +127,26 @@ if pt_up_wait "$RUN" 30 "$up"; then
     grep -q '^reflex_stops_between 1 count' "$PT_WORK/between-tasks.out"
   pt_check "and named" \
     grep -qE 'stopped on a reflex between tasks: joint [1-7]' "$PT_WORK/between-tasks.err"
+  # A stop, then a PLACE whose pose holds the stopped sphere 1.5 cm inside the box's -x side
+  # (a study's next task after a stop in a push): only a resumed arm can move the sphere
+  # out; a stopped one would leave it there, and the PLACE dropped after 10 s.
+  n_stop=$(grep -c 'the robot stopped' "$RUN/bridge.log")
+  for ((i = 0; i < 20; i++)); do
+    (($(grep -c 'the robot stopped' "$RUN/bridge.log") > n_stop)) && break
+    "$PT_INJ" --plan-to 0.45,0 --repeat 5 --gap-ms 20 >/dev/null || pt_fail "nudge-inject --plan-to failed"
+  done
+  pt_check "the arm stopped again, no task to come" \
+    test "$(grep -c 'the robot stopped' "$RUN/bridge.log")" -gt "$n_stop"
+  sleep 1  # braked to rest
+  pt_lc ee-pos "$LOG2" --from-utime $(($(date +%s%6N) - 300000)) >"$PT_WORK/stop-pos"
+  sx=$(fig ee_pos_last_x "$PT_WORK/stop-pos") sy=$(fig ee_pos_last_y "$PT_WORK/stop-pos")
+  px=$(awk -v x="$sx" 'BEGIN { printf "%.3f", x + 0.035 }') py=$(awk -v y="$sy" 'BEGIN { printf "%.3f", y }')
+  pt_say "the arm stopped with the sphere at ($sx, $sy) m: PLACE at ($px, $py)"
+  out=$("$PT_INJ" --place-at "$px,$py,0" 2>&1) || pt_fail "nudge-inject --place-at failed: $out"
+  placed=$(printf ': the object placed at (%+.3f, %+.3f) m' "$px" "$py")
+  pt_check "the PLACE resumed the stopped arm and the object was put down" \
+    pt_wait_for 15 grep -qF "$placed" "$RUN/bridge.log"
+  pt_check_not "no PLACE dropped" grep -q 'dropped: the sphere stayed' "$RUN/bridge.log"
   pt_stop_logger
   pt_up_stop "$up" 30
   pt_check "nudge-up run exits 0 after SIGINT (got $PT_RC)" test "$PT_RC" -eq 0
