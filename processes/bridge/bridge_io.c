@@ -169,12 +169,12 @@ void bridge_io_report(bridge_io *io, uint64_t *version, const nd_rtloop_stats *l
     const bridge_sample *sa = r->stop_sample;
     static const char *const how[4] = {"held", "Taylor", "future", "future of the one before"};
     fprintf(stderr, PROG ": the robot stopped: %s %.4g beyond its limit %.4g; braking until the "
-            "next task or PLACE (%lld stops); setpoint sampled from EE_CMD %lld (%s) %.2f ms after its "
-            "time, the newest arrived %.2f ms before%s; the step before: EE_CMD %lld (%s) %.2f "
-            "ms, %.2f ms%s\n", nds_panda_reflex_name(x, name, sizeof(name)), x->value, x->limit,
-            (long long)r->stops, (long long)sa[0].cmd_seq, how[sa[0].how & 3], 1e3 * sa[0].h,
-            1e3 * sa[0].silence, sa[0].join >= 0 ? ", joining" : "", (long long)sa[1].cmd_seq,
-            how[sa[1].how & 3], 1e3 * sa[1].h, 1e3 * sa[1].silence,
+            "next task or PLACE (%lld stops); setpoint sampled from EE_CMD %lld (%s) %.2f ms "
+            "after its time, the newest arrived %.2f ms before%s; the step before: EE_CMD %lld "
+            "(%s) %.2f ms, %.2f ms%s\n", nds_panda_reflex_name(x, name, sizeof(name)), x->value,
+            x->limit, (long long)r->stops, (long long)sa[0].cmd_seq, how[sa[0].how & 3],
+            1e3 * sa[0].h, 1e3 * sa[0].silence, sa[0].join >= 0 ? ", joining" : "",
+            (long long)sa[1].cmd_seq, how[sa[1].how & 3], 1e3 * sa[1].h, 1e3 * sa[1].silence,
             sa[1].join >= 0 ? ", joining" : "");
     io->stops_said = r->stops;
   }

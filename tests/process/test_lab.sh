@@ -140,7 +140,8 @@ if pt_up_wait "$RUN" 30 "$up"; then
   sleep 1  # braked to rest
   pt_lc ee-pos "$LOG2" --from-utime $(($(date +%s%6N) - 300000)) >"$PT_WORK/stop-pos"
   sx=$(fig ee_pos_last_x "$PT_WORK/stop-pos") sy=$(fig ee_pos_last_y "$PT_WORK/stop-pos")
-  px=$(awk -v x="$sx" 'BEGIN { printf "%.3f", x + 0.035 }') py=$(awk -v y="$sy" 'BEGIN { printf "%.3f", y }')
+  px=$(awk -v x="$sx" 'BEGIN { printf "%.3f", x + 0.035 }')
+  py=$(awk -v y="$sy" 'BEGIN { printf "%.3f", y }')
   pt_say "the arm stopped with the sphere at ($sx, $sy) m: PLACE at ($px, $py)"
   out=$("$PT_INJ" --place-at "$px,$py,0" 2>&1) || pt_fail "nudge-inject --place-at failed: $out"
   placed=$(printf ': the object placed at (%+.3f, %+.3f) m' "$px" "$py")
