@@ -78,8 +78,8 @@ int nds_planner_set_theta(nds_planner *p, const double theta[ND_NTHETA], char *e
 void nds_planner_cfg_fit_limits(nds_planner_cfg *cfg);
 
 /* A horizon must see the sphere round the object to where a push starts: at a slow task's
- * limit a segment lasts long enough to move it NDS_PLANNER_REACH. At 0.15 m/s the 0.3 s
- * segments saw 4.5 cm, and a sphere on the goal's side stayed put (doc/decisions.md#slow-reach). */
+ * limit a segment lasts long enough to move it NDS_PLANNER_REACH, about the way round the
+ * box's corner; a 0.3 s segment at 0.15 m/s spans 4.5 cm (doc/decisions.md#slow-reach). */
 #define NDS_PLANNER_REACH 0.15  /* m */
 #define NDS_PLANNER_T_MAX 1.0   /* s */
 

@@ -245,7 +245,6 @@ pt_check "moved: the record starts with the object at the origin (off by $o0 m)"
 # the task still runs, from where the object lies, but is not recorded: a record starts at
 # the placed pose.
 n0=$(n_origin)
-k=0
 placed_k() { (($(n_origin) >= n0 + k)); }
 pt_spawn TASKS_PID "$PT_BIN/nudge-tasks" --record "$PBUF" --eps 2.5e-3 --tau 2 --settle 4 \
   --place 0,0,0 --goal 0.15,0,0 >"$PT_WORK/moved3.out" 2>"$PT_WORK/moved3.err"
