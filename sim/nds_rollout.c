@@ -158,6 +158,7 @@ void nds_rollout_ff(const nds_model *nm, mjData *d, const nds_ctrl_cfg *ctrl,
     }
     /* A sample due before the first step (under NS steps) takes the pose after it. */
     while (next < NDS_ROLLOUT_NS && n + 1 >= next_at) {
+      for (int k = 0; k < 2; k++) out->ee_at[next][k] = d->qpos[nm->ee_qpos[k]] + off[k];
       obj_pose(nm, d, out->obj_at[next++]);
       next_at = (long)(next + 1) * nsteps / NDS_ROLLOUT_NS;
     }

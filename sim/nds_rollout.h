@@ -21,6 +21,7 @@ typedef struct {
   double obj_xy[2];     /* final object position */
   double obj_yaw;       /* final object yaw */
   double ee_xy[2];      /* final sphere position */
+  double ee_at[NDS_ROLLOUT_NS][2];  /* sphere (x, y) at the obj_at samples */
   double acc_sq_mean;   /* L_acc: mean over steps of |setpoint acceleration|^2 */
   double v_peak;        /* peak setpoint speed over the rollout, m/s */
   double a_peak;        /* peak setpoint acceleration magnitude, m/s^2 */

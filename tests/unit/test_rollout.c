@@ -160,9 +160,9 @@ static void test_friction_changes_push(void **state) {
   assert_true(lo > hi + 0.02);
 }
 
-/* The object's poses along the horizon: the last is the final pose, a sample where a
- * segment ends is where a rollout of the segments up to it ends, and a straight push
- * never moves the object back. */
+/* The object's poses and the sphere's positions along the horizon: the last are the final
+ * ones, a sample where a segment ends is where a rollout of the segments up to it ends,
+ * and a straight push never moves either back. */
 static void test_samples_along_horizon(void **state) {
   (void)state;
   nds_model nm;
@@ -183,7 +183,12 @@ static void test_samples_along_horizon(void **state) {
   /* 600 steps, 8 samples: the fourth falls at step 300, where the first segment ends. */
   assert_true(full.obj_at[half][0] == first.obj_xy[0] && full.obj_at[half][1] == first.obj_xy[1]);
   assert_true(full.obj_at[half][2] == first.obj_yaw);
-  for (int k = 1; k < NDS_ROLLOUT_NS; k++) assert_true(full.obj_at[k][0] >= full.obj_at[k - 1][0]);
+  assert_true(full.ee_at[last][0] == full.ee_xy[0] && full.ee_at[last][1] == full.ee_xy[1]);
+  assert_true(full.ee_at[half][0] == first.ee_xy[0] && full.ee_at[half][1] == first.ee_xy[1]);
+  for (int k = 1; k < NDS_ROLLOUT_NS; k++) {
+    assert_true(full.obj_at[k][0] >= full.obj_at[k - 1][0]);
+    assert_true(full.ee_at[k][0] > full.ee_at[k - 1][0]);
+  }
   printf("sampled_object_x %.4f %.4f %.4f m (first, mid, last)\n", full.obj_at[0][0],
          full.obj_at[half][0], full.obj_at[last][0]);
   assert_true(full.obj_at[last][0] > full.obj_at[0][0] + 0.02);
@@ -392,6 +397,9 @@ static void test_free_flight_agrees(void **state) {
                                          0.05 * fabs(nd_wrap_angle(a[2] - b[2]))));
       }
       worst_ee = fmax(worst_ee, hypot(ff.ee_xy[0] - full.ee_xy[0], ff.ee_xy[1] - full.ee_xy[1]));
+      for (int s = 0; s < NDS_ROLLOUT_NS; s++)
+        worst_ee = fmax(worst_ee, hypot(ff.ee_at[s][0] - full.ee_at[s][0],
+                                        ff.ee_at[s][1] - full.ee_at[s][1]));
       skipped += ff.skipped, steps += ff.steps;
       if (i % 3 == 0) far_skipped += ff.skipped, far_steps += ff.steps;
       if (i % 3 == 2) assert_true(ff.skipped < ff.steps);
