@@ -8,8 +8,9 @@
  * w_rot = 2e-2, the paper's lambda1: a 90 degree yaw error weighs like 14 cm of position.
  * w_prox = 5e-3 only breaks ties: it pulls the sphere to the object when no candidate
  *   touches it, yet the last centimetres of pushing outvote it.
- * w_acc = 1e-5: a smoothing preference, small next to a centimetre of progress, that does
- *   not forbid the accelerations a push needs.
+ * w_acc = 2e-6: a smoothing preference, small next to a centimetre of progress and next
+ *   to what L_prox gains when the sphere approaches at the limits (a 17 cm approach done
+ *   in 0.3 s rather than 0.6 s: about 2.4e-5), so it does not slow the approach.
  * prox_lead = 8 cm, about the box's half length plus the sphere's radius: the tie-break
  *   then favours the side a push toward the goal starts from, so a sphere on the wrong side
  *   goes around instead of hovering (doc/decisions.md#prox-lead).
@@ -17,7 +18,7 @@
  *   where the same centimetre of L_pos costs 1e-4 (doc/decisions.md#edge-cost).
  * The arithmetic: doc/decisions.md#cost-weights. */
 nd_cost_weights nd_cost_weights_default(void) {
-  nd_cost_weights w = {.w_rot = 2e-2, .w_prox = 5e-3, .w_acc = 1e-5, .prox_lead = 0.08,
+  nd_cost_weights w = {.w_rot = 2e-2, .w_prox = 5e-3, .w_acc = 2e-6, .prox_lead = 0.08,
                        .w_edge = 10.0};
   return w;
 }
@@ -56,11 +57,19 @@ double nd_cost_edge(const nd_cost_weights *w, const nd_goal *goal, const double 
   return e;
 }
 
+/* L_prox over the horizon, not at its end: a candidate that reaches the lead point at the
+ * horizon's end scores like one that gets there at once, and the receding horizon then
+ * puts the sphere's arrival off at every re-plan (doc/decisions.md#prox-mean). */
 double nd_cost_plan(const nd_cost_weights *w, const nd_goal *goal, double task,
-                    const double obj_xy[2], const double ee_xy[2], double acc_sq_mean) {
-  double lead[2];
-  nd_cost_lead_point(w->prox_lead, goal, obj_xy, lead);
-  return task + w->w_prox * nd_cost_prox(lead, ee_xy) + w->w_acc * acc_sq_mean;
+                    const double (*obj_at)[3], const double (*ee_at)[2], int n,
+                    double acc_sq_mean) {
+  double prox = 0.0;
+  for (int k = 0; k < n; k++) {
+    double lead[2];
+    nd_cost_lead_point(w->prox_lead, goal, obj_at[k], lead);
+    prox += nd_cost_prox(lead, ee_at[k]);
+  }
+  return task + w->w_prox * prox / (n > 0 ? n : 1) + w->w_acc * acc_sq_mean;
 }
 
 /* The task ends the moment its error falls below eps, so a plan is worth when it gets

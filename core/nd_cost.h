@@ -40,10 +40,12 @@ double nd_cost_edge(const nd_cost_weights *w, const nd_goal *goal, const double 
                     const double lo[2], const double hi[2]);
 
 /* E of a rollout without L_edge: the task term `task` (the paper's nd_task_error of the
- * final state, or nd_cost_arrival), L_prox of the final state (from the lead point), and
+ * final state, or nd_cost_arrival), L_prox as the mean over the rollout's n samples of the
+ * object obj_at[k] = (x, y, yaw) and the sphere ee_at[k] (each from its lead point), and
  * L_acc = acc_sq_mean, the mean of |a_ee|^2 over its steps. */
 double nd_cost_plan(const nd_cost_weights *w, const nd_goal *goal, double task,
-                    const double obj_xy[2], const double ee_xy[2], double acc_sq_mean);
+                    const double (*obj_at)[3], const double (*ee_at)[2], int n,
+                    double acc_sq_mean);
 
 /* The task term by arrival at eps (a threshold to aim at, e.g. a share of the goal's),
  * from the object's poses at[k] = (x, y, yaw) at (k + 1) / n of the horizon (at[n - 1] the

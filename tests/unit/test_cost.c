@@ -15,18 +15,43 @@ static void test_known_values(void **state) {
 
   const nd_cost_weights w = {.w_rot = 0.1, .w_prox = 0.01, .w_acc = 0.001};
   const double yaw = 0.3 + 3.14159265358979323846 / 6.0;
-  assert_near(nd_task_error(&w, &g, obj, yaw), 0.25 + 0.1 * 0.25, 1e-15);
-  assert_near(nd_cost_plan(&w, &g, nd_task_error(&w, &g, obj, yaw), obj, ee, 40.0),
+  const double obj_at[1][3] = {{obj[0], obj[1], yaw}}, ee_at[1][2] = {{ee[0], ee[1]}};
+  const double task = nd_task_error(&w, &g, obj, yaw);
+  assert_near(task, 0.25 + 0.1 * 0.25, 1e-15);
+  assert_near(nd_cost_plan(&w, &g, task, obj_at, ee_at, 1, 40.0),
               0.25 + 0.1 * 0.25 + 0.01 * 0.0025 + 0.001 * 40.0, 1e-15);
   /* Each weight scales only its own term. */
   nd_cost_weights w2 = w;
   w2.w_acc = 0.0;
-  assert_near(nd_cost_plan(&w, &g, nd_task_error(&w, &g, obj, yaw), obj, ee, 40.0) - nd_cost_plan(&w2, &g, nd_task_error(&w2, &g, obj, yaw), obj, ee, 40.0),
+  assert_near(nd_cost_plan(&w, &g, task, obj_at, ee_at, 1, 40.0) -
+                  nd_cost_plan(&w2, &g, task, obj_at, ee_at, 1, 40.0),
               0.04, 1e-15);
   w2 = w;
   w2.w_prox = 0.0;
-  assert_near(nd_cost_plan(&w, &g, nd_task_error(&w, &g, obj, yaw), obj, ee, 40.0) - nd_cost_plan(&w2, &g, nd_task_error(&w2, &g, obj, yaw), obj, ee, 40.0),
+  assert_near(nd_cost_plan(&w, &g, task, obj_at, ee_at, 1, 40.0) -
+                  nd_cost_plan(&w2, &g, task, obj_at, ee_at, 1, 40.0),
               0.01 * 0.0025, 1e-15);
+}
+
+/* L_prox is the mean over the horizon's samples: of two approaches that end at the lead
+ * point, the one there sooner costs less, by the mean of the squared distances it saved;
+ * each sample's lead point follows the object's pose there. */
+static void test_prox_over_horizon(void **state) {
+  (void)state;
+  const nd_goal g = {.x = 0.3, .y = 0.0, .yaw = 0.0};
+  const nd_cost_weights w = {.w_prox = 1.0, .prox_lead = 0.08};
+  const double obj_at[4][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
+  const double soon[4][2] = {{-0.12, 0}, {-0.08, 0}, {-0.08, 0}, {-0.08, 0}};
+  const double late[4][2] = {{-0.20, 0}, {-0.16, 0}, {-0.12, 0}, {-0.08, 0}};
+  const double c_soon = nd_cost_plan(&w, &g, 0.0, obj_at, soon, 4, 0.0);
+  const double c_late = nd_cost_plan(&w, &g, 0.0, obj_at, late, 4, 0.0);
+  assert_near(c_soon, 0.04 * 0.04 / 4, 1e-15);
+  assert_near(c_late, (0.12 * 0.12 + 0.08 * 0.08 + 0.04 * 0.04) / 4, 1e-15);
+  assert_true(c_soon < c_late);
+  /* The object moved half way to the goal at the last sample: so did its lead point. */
+  const double moving[4][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}, {0.15, 0, 0}};
+  const double behind[4][2] = {{-0.08, 0}, {-0.08, 0}, {-0.08, 0}, {0.07, 0}};
+  assert_near(nd_cost_plan(&w, &g, 0.0, moving, behind, 4, 0.0), 0.0, 1e-15);
 }
 
 /* The lead point: behind the object on the goal's line, fading into it near the goal. */
@@ -50,10 +75,11 @@ static void test_lead_point(void **state) {
   /* The plan cost charges the sphere's distance to it: behind the object (seen from the
    * goal) costs nothing, the goal side twice the lead squared. */
   nd_cost_weights w = {.w_rot = 0.0, .w_prox = 1.0, .w_acc = 0.0, .prox_lead = 0.08};
-  const double obj[2] = {0.8, 0.2};
-  const double behind[2] = {0.848, 0.264}, front[2] = {0.752, 0.136};
-  assert_near(nd_cost_plan(&w, &g, nd_task_error(&w, &g, obj, 0.0), obj, behind, 0.0), nd_cost_pos(obj, &g), 1e-15);
-  assert_near(nd_cost_plan(&w, &g, nd_task_error(&w, &g, obj, 0.0), obj, front, 0.0) - nd_cost_pos(obj, &g),
+  const double obj[1][3] = {{0.8, 0.2, 0.0}};
+  const double behind[1][2] = {{0.848, 0.264}}, front[1][2] = {{0.752, 0.136}};
+  const double task = nd_task_error(&w, &g, obj[0], 0.0);
+  assert_near(nd_cost_plan(&w, &g, task, obj, behind, 1, 0.0), nd_cost_pos(obj[0], &g), 1e-15);
+  assert_near(nd_cost_plan(&w, &g, task, obj, front, 1, 0.0) - nd_cost_pos(obj[0], &g),
               4.0 * 0.08 * 0.08, 1e-15);
 }
 
@@ -200,6 +226,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_known_values),
       cmocka_unit_test(test_lead_point),
+      cmocka_unit_test(test_prox_over_horizon),
       cmocka_unit_test(test_arrival),
       cmocka_unit_test(test_edge),
       cmocka_unit_test(test_cuboid_symmetry),
