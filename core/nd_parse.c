@@ -3,6 +3,7 @@
 #include "nd_parse.h"
 
 #include <errno.h>
+#include <float.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -17,7 +18,10 @@ int nd_parse_double(const char *s, const char *what, double lo, double hi, doubl
   }
   errno = 0;
   double v = strtod(s, &end);
-  if (*end || errno == ERANGE || !isfinite(v)) {
+  /* An underflow (ERANGE with a result at most DBL_MIN) is a finite number rounded to a
+   * subnormal or zero: accepted, so a subnormal printed with %.17g parses back. An
+   * overflow is refused. */
+  if (*end || (errno == ERANGE && !(fabs(v) <= DBL_MIN)) || !isfinite(v)) {
     snprintf(err, errlen, "%s: '%s' is not a finite number", what, s);
     return -1;
   }

@@ -1,6 +1,8 @@
 /* nd_parse: strict numbers and lists; every refusal names the option. */
 #include "nd_test.h"
 
+#include <float.h>
+#include <stdio.h>
 #include <string.h>
 
 #include "nd_parse.h"
@@ -19,6 +21,18 @@ static void test_numbers(void **state) {
     assert_int_equal(nd_parse_double(bad[k], "--x", 0, 1, &d, err, sizeof(err)), -1);
     assert_non_null(strstr(err, "--x"));
   }
+  /* Underflow is a number, rounded: a subnormal, written in hex or as %.17g prints it,
+   * and a decimal below the least subnormal (zero). Overflow is not. */
+  assert_int_equal(nd_parse_double("0x1p-1038", "--x", -1, 1, &d, err, sizeof(err)), 0);
+  assert_true(d == 0x1p-1038);
+  char printed[64];
+  snprintf(printed, sizeof(printed), "%.17g", d);
+  assert_int_equal(nd_parse_double(printed, "--x", -1, 1, &d, err, sizeof(err)), 0);
+  assert_true(d == 0x1p-1038);
+  assert_int_equal(nd_parse_double("-1e-400", "--x", -1, 1, &d, err, sizeof(err)), 0);
+  assert_true(d == 0.0);
+  assert_int_equal(nd_parse_double("-1e999", "--x", -DBL_MAX, 1, &d, err, sizeof(err)), -1);
+  assert_non_null(strstr(err, "not a finite number"));
   assert_int_equal(nd_parse_int("12", "--n", 1, 20, &i, err, sizeof(err)), 0);
   assert_int_equal(i, 12);
   assert_int_equal(nd_parse_int("21", "--n", 1, 20, &i, err, sizeof(err)), -1);
