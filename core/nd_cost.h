@@ -26,7 +26,8 @@ double nd_cost_pos(const double obj_xy[2], const nd_goal *goal);
 /* L_rot = sin^2(yaw - goal yaw): zero at the goal yaw and at goal yaw + pi (cuboid symmetry). */
 double nd_cost_rot(double obj_yaw, const nd_goal *goal);
 
-/* |obj - ee|^2 over (x, y); L_prox is it with the lead point for obj. */
+/* |obj - ee|^2 over (x, y); L_prox is its mean over the horizon, with the lead point for obj
+ * (nd_cost_plan). */
 double nd_cost_prox(const double obj_xy[2], const double ee_xy[2]);
 
 /* The point L_prox draws the sphere to: obj - lead (goal - obj) / max(|goal - obj|,

@@ -3,7 +3,6 @@
 #include "nd_parse.h"
 
 #include <errno.h>
-#include <float.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -16,12 +15,11 @@ int nd_parse_double(const char *s, const char *what, double lo, double hi, doubl
     snprintf(err, errlen, "%s: empty value, expected a number in [%g, %g]", what, lo, hi);
     return -1;
   }
-  errno = 0;
+  /* strtod's ERANGE is not the test: an overflow returns HUGE_VAL, refused as not finite;
+   * an underflow returns the rounded subnormal or zero, accepted, so a subnormal printed
+   * with %.17g parses back. */
   double v = strtod(s, &end);
-  /* An underflow (ERANGE with a result at most DBL_MIN) is a finite number rounded to a
-   * subnormal or zero: accepted, so a subnormal printed with %.17g parses back. An
-   * overflow is refused. */
-  if (*end || (errno == ERANGE && !(fabs(v) <= DBL_MIN)) || !isfinite(v)) {
+  if (*end || !isfinite(v)) {
     snprintf(err, errlen, "%s: '%s' is not a finite number", what, s);
     return -1;
   }

@@ -249,8 +249,8 @@ static int plan_cost(void *ctx, const double *x, int n, double *cost) {
           c->arrival > 0.0
               ? nd_cost_arrival(&c->w, p->goal, c->arrival * p->goal->eps, o->obj_at, NDS_ROLLOUT_NS)
               : nd_task_error(&c->w, p->goal, o->obj_xy, o->obj_yaw);
-      cost[i] = nd_cost_plan(&c->w, p->goal, task, (const double(*)[3])o->obj_at,
-                             (const double(*)[2])o->ee_at, NDS_ROLLOUT_NS, o->acc_sq_mean) +
+      cost[i] = nd_cost_plan(&c->w, p->goal, task, o->obj_at, o->ee_at, NDS_ROLLOUT_NS,
+                             o->acc_sq_mean) +
                 c->w.w_edge * nd_cost_edge(&c->w, p->goal, o->obj_xy, c->ws_lo, c->ws_hi);
     }
     /* The best rollout so far, so the plan's prediction needs no rollout of its own. */
