@@ -137,7 +137,9 @@ if pt_up_wait "$RUN" 30 "$up"; then
   done
   pt_check "the arm stopped again, no task to come" \
     test "$(grep -c 'the robot stopped' "$RUN/bridge.log")" -gt "$n_stop"
-  sleep 1  # braked to rest
+  # Braked to rest: 0.2 s of ROBOT_STATE within 1 mm (its noise is a tenth of that).
+  pt_wait_for 10 eval 'pt_lc ee-pos "$LOG2" --from-utime $(($(date +%s%6N) - 200000)) \
+    --max-travel 0.001 >/dev/null 2>&1' || pt_fail "the stopped arm did not come to rest"
   pt_lc ee-pos "$LOG2" --from-utime $(($(date +%s%6N) - 300000)) >"$PT_WORK/stop-pos"
   sx=$(fig ee_pos_last_x "$PT_WORK/stop-pos") sy=$(fig ee_pos_last_y "$PT_WORK/stop-pos")
   px=$(awk -v x="$sx" 'BEGIN { printf "%.3f", x + 0.035 }')
