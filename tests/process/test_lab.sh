@@ -29,6 +29,9 @@
 # 4. An object left outside the arm's box (x 0.165, where the lab box ends at 0.15): one
 #    short task toward the box's inside; the planner's log says where the object is and
 #    that the sphere cannot get behind it, once, and the task ends.
+# 5. The planner killed while the sphere moves at 0.15 m/s or more: the executor brakes to
+#    rest, the supervisor restarts the planner, and the bridge logs no reflex (the brake
+#    is Cartesian; the lab's caps keep it within the joints' limits).
 set -u
 PT_NAME=test_lab
 . "$(dirname "${BASH_SOURCE[0]}")/../tools/process-lib.sh"
@@ -222,4 +225,50 @@ pt_check "the planner logged the object outside the keypoint box, once" \
   test "$(grep -cE 'the object at \(\+0\.16[0-9], -0\.0[34][0-9]\) m lies 0\.01[0-9] m outside the keypoint box x \[-0\.15, 0\.15\].*cannot get behind it' "$EDGE/planner.log")" -eq 1
 pt_check "the task ended" grep -qE '^task 1/1 .*(reached|timed out|stopped after)' "$PT_WORK/edge.out"
 pt_none_left "$EDGE"
+
+# --- 5. the planner dies mid-push: the arm brakes within its joints' limits ------------
+# The executor's brake when plans stop coming is a Cartesian minimum-snap stop within its
+# own limits; the arm's joints are not in it. The lab's caps keep such a stop within them
+# (doc/lab-world.md#reach): no reflex, whatever the arm was doing when the planner died.
+LOG5=$PT_WORK/kill.lcmlog
+KILL=$PT_WORK/kill
+pt_logger "$LOG5"
+pt_spawn up "$PT_BIN/nudge-up" run --world lab --log-dir "$KILL" 2>"$PT_WORK/kill-up.err"
+if pt_up_wait "$KILL" 30 "$up"; then
+  # An eps no push meets keeps the task running through the kill and the restart.
+  pt_spawn tasks "$PT_BIN/nudge-tasks" --world lab --goal 0.0,0.25,0,1e-12 \
+    --tau "$(pt_slow 6)" >"$PT_WORK/kill-tasks.out" 2>"$PT_WORK/kill-tasks.err"
+  if pt_wait_for 15 "$PT_LC" live "$LOG5" --min-plans 3 --min-speed 0.15; then
+    planner=$(sed -n -E 's/.*nudge-planner up \(pid ([0-9]+)\).*/\1/p' "$KILL/supervisor.log" |
+      tail -n 1)
+    kill -KILL "$planner"
+    t_kill=$(pt_now_us)
+    pt_say "SIGKILL to nudge-planner (pid $planner) with the sphere moving"
+    pt_check "the supervisor restarted the planner" \
+      pt_wait_for 10 grep -q 'restarted nudge-planner' "$KILL/supervisor.log"
+  else
+    pt_fail "no plans or no motion of 0.15 m/s within $((15 * PT_SLOW)) s of the task's start"
+  fi
+  pt_wait_pid "$tasks" 30 || pt_fail "nudge-tasks did not finish"
+  cat "$PT_WORK/kill-tasks.out"
+  pt_up_stop "$up" 30
+  pt_check "nudge-up run exits 0 after SIGINT (got $PT_RC)" test "$PT_RC" -eq 0
+  pt_stop_logger
+  pt_val t0 last "$LOG5" PLAN --before-utime "${t_kill:-0}" last_utime
+  if [[ -n ${t_kill:-} && -n $t0 && $t0 -gt 0 ]]; then
+    pt_lc stop-after "$LOG5" --t0-utime "$t0" >"$PT_WORK/kill-stop"
+    cat "$PT_WORK/kill-stop"
+    v=$(fig stop_speed_at_stopping "$PT_WORK/kill-stop")
+    pt_figure lab_kill_brake_speed "${v:-0}" m/s
+    pt_check "the executor braked to rest after the planner died" \
+      test -n "$(fig stop_hold_after "$PT_WORK/kill-stop")"
+  else
+    pt_fail "no PLAN before the kill in the log"
+  fi
+  pt_check_not "no reflex: the brake and the restarted planner's plans kept to the arm's limits" \
+    grep -q 'the robot stopped' "$KILL/bridge.log"
+  pt_none_left "$KILL"
+else
+  pt_fail "nudge-up run --world lab did not come up (section 5)"
+fi
 exit $((PT_FAILS > 0))
