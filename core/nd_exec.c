@@ -52,6 +52,7 @@ nd_exec_cfg nd_exec_cfg_default(void) {
   c.v_max = 1.7;
   c.a_max = 13.0;
   c.j_max = 6500.0;
+  c.brake_a_max = 0.0;
   c.t_min = 0.01;
   c.t_max = 2.0;
   c.stretch = 1.1;
@@ -68,6 +69,8 @@ int nd_exec_cfg_check(const nd_exec_cfg *cfg, char *err, int errlen) {
   const char *msg = NULL;
   if (!pos_finite(cfg->v_max) || !pos_finite(cfg->a_max) || !pos_finite(cfg->j_max))
     msg = "limits v_max, a_max, j_max must be finite and positive";
+  else if (!isfinite(cfg->brake_a_max) || cfg->brake_a_max < 0.0)
+    msg = "brake_a_max must be finite and >= 0 (0: a_max)";
   else if (!pos_finite(cfg->t_min) || !isfinite(cfg->t_max) || cfg->t_max <= cfg->t_min)
     msg = "need 0 < t_min < t_max (finite)";
   else if (!isfinite(cfg->stretch) || cfg->stretch <= 1.0)
@@ -286,9 +289,15 @@ static int fit(const nd_exec_cfg *cfg, const double s0[2][4], const double *p1,
 }
 
 /* Brake from state s to rest into *seg, *hold the rest position; T = 0 when s is at
- * rest already. 0 or -1 (no duration up to t_max fits the limits). */
-static int brake_fit(const nd_exec_cfg *cfg, const double s[2][4], nd_snap_seg *seg,
-                     double hold[2]) {
+ * rest already. With capped set its acceleration keeps to brake_a_max where that is set:
+ * a state already accelerating harder has no such brake. 0 or -1 (no duration up to
+ * t_max fits the limits). */
+static int brake_fit(const nd_exec_cfg *limits, int capped, const double s[2][4],
+                     nd_snap_seg *seg, double hold[2]) {
+  nd_exec_cfg braking = *limits;
+  if (capped && limits->brake_a_max > 0.0)
+    braking.a_max = fmin(limits->a_max, limits->brake_a_max);
+  const nd_exec_cfg *cfg = &braking;
   int moving = 0;
   for (int ax = 0; ax < 2; ax++)
     for (int k = ND_V; k <= ND_J; k++) moving |= s[ax][k] != 0.0;
@@ -368,7 +377,7 @@ int nd_exec_plan(nd_exec *ex, const nd_exec_cfg *cfg, double now, const double k
   /* The brake from the keypoint itself first: it is cheap, and it is what fails for a
    * speed at v_max, which the tracking search would misreport as unreachable. */
   const double ideal[2][4] = {{key[0], key[2], 0.0, 0.0}, {key[1], key[3], 0.0, 0.0}};
-  if (brake_fit(cfg, ideal, &brake, hold) != 0) {
+  if (brake_fit(cfg, 0, ideal, &brake, hold) != 0) {
     if (err && errlen > 0)
       snprintf(err, (size_t)errlen, "nd_exec: keypoint speed %.4f m/s too close to v_max "
                "%.3f to certify a brake", vk, cfg->v_max);
@@ -382,7 +391,7 @@ int nd_exec_plan(nd_exec *ex, const nd_exec_cfg *cfg, double now, const double k
     return ND_EXEC_ELIMIT;
   }
   nd_snap_seg_eval(&seg, seg.T, end);
-  if (brake_fit(cfg, end, &brake, hold) != 0) {
+  if (brake_fit(cfg, 0, end, &brake, hold) != 0) {
     if (err && errlen > 0)
       snprintf(err, (size_t)errlen, "nd_exec: no brake to rest from the keypoint within "
                "the limits");
@@ -422,15 +431,17 @@ int nd_exec_heading_to(const nd_exec *ex, double now, const double key[4], doubl
 }
 
 /* Commit to rest from time t on the tracking segment: of a few candidate departures
- * from t to the segment's end (where the brake planned with the segment is the last
- * candidate, always feasible and inside the workspace margin), take the one that reaches
- * rest first and stays within the margin. Reaching rest first, not departing first, is
- * what keeps a robot with stale inputs safe; an early brake toward the wall at speed
- * would stop beyond where the planned one does. */
+ * from t to the segment's end, each braking within brake_a_max, take the one that reaches
+ * rest first and stays within the workspace margin; if none does, the brake planned with
+ * the segment (at a_max, always feasible and inside the margin). Reaching rest first, not
+ * departing first, is what keeps a robot with stale inputs safe; an early brake toward
+ * the wall at speed would stop beyond where the planned one does. The cap holds here and
+ * not in the planned brake: only this brake runs when plans stop mid-segment, and a
+ * planned brake at the cap would travel further and shrink the workspace plans may use. */
 static void begin_stop(nd_exec *ex, const nd_exec_cfg *cfg, double t) {
   const double t_end = ex->t_brake;
-  double best = t_end + ex->brake.T;
-  for (int k = 0; k < ND_EXEC_DEPART; k++) {
+  double best = INFINITY;
+  for (int k = 0; k <= ND_EXEC_DEPART; k++) {
     const double td = t + (t_end - t) * (double)k / ND_EXEC_DEPART;
     double s[2][4], hold[2];
     nd_snap_seg brake;
@@ -438,7 +449,7 @@ static void begin_stop(nd_exec *ex, const nd_exec_cfg *cfg, double t) {
     nd_snap_seg_eval(&ex->seg, td - ex->t_seg, s);
     int axis;
     double at;
-    if (brake_fit(cfg, s, &brake, hold) == 0 && td + brake.T < best &&
+    if (brake_fit(cfg, 1, s, &brake, hold) == 0 && td + brake.T < best &&
         !(seg_outside(cfg, &brake, &axis, &at) > 0.0)) {
       best = td + brake.T;
       ex->brake = brake;

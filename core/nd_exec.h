@@ -36,6 +36,9 @@ typedef struct {
   double v_max;        /* bound on planar speed |v|, m/s (Panda Cartesian: 1.7) */
   double a_max;        /* bound on |a|, m/s^2 (Panda: 13) */
   double j_max;        /* bound on |j|, m/s^3 (Panda: 6500) */
+  double brake_a_max;  /* bound on |a| of the brake begun when the inputs go stale, m/s^2;
+                        * 0: a_max. An arm's joints may take less than its Cartesian a_max in
+                        * some directions, and that brake is not planned against them */
   double t_min;        /* shortest segment, s; shorter requests start the search here */
   double t_max;        /* longest tracking or brake segment, s; beyond it: rejected */
   double stretch;      /* factor (> 1) by which a segment's duration grows per try */
@@ -80,12 +83,12 @@ typedef struct {
   double hold[2];      /* rest position: end of the brake */
 } nd_exec;
 
-/* Defaults: Panda Cartesian limits 1.7 m/s, 13 m/s^2, 6500 m/s^3; t_min 0.01 s,
- * t_max 2 s, stretch 1.1, n_check 64; workspace [-0.5, 0.5]^2 m, margin 0.04 m. */
+/* Defaults: Panda Cartesian limits 1.7 m/s, 13 m/s^2, 6500 m/s^3, brakes at a_max; t_min
+ * 0.01 s, t_max 2 s, stretch 1.1, n_check 64; workspace [-0.5, 0.5]^2 m, margin 0.04 m. */
 nd_exec_cfg nd_exec_cfg_default(void);
 
-/* Check cfg (finite positive limits, t_min < t_max, stretch > 1, n_check >= 2, a finite
- * workspace with lo < hi, margin finite and >= 0).
+/* Check cfg (finite positive limits, brake_a_max finite and >= 0, t_min < t_max, stretch
+ * > 1, n_check >= 2, a finite workspace with lo < hi, margin finite and >= 0).
  * Returns ND_EXEC_OK or ND_EXEC_EINVAL with a message in err. */
 int nd_exec_cfg_check(const nd_exec_cfg *cfg, char *err, int errlen);
 
@@ -124,8 +127,9 @@ int nd_exec_heading_to(const nd_exec *ex, double now, const double key[4], doubl
 /* Setpoint at time now into out[axis][p, v, a, j]; returns the mode. If stale is
  * nonzero in mode TRACK, commits to stopping: of a few candidate brake departures from
  * now to the segment's end (usually now wins), the one reaching rest first within the
- * limits and the workspace margin; rest is reached at the latest when the brake planned at the end would. A non-finite now or one before the last call is treated as the
- * last call's time. No allocation; O(1) except the one brake search when going stale. */
+ * limits, brake_a_max and the workspace margin, else the brake planned at the end. A
+ * non-finite now or one before the last call is treated as the last call's time. No
+ * allocation; O(1) except the one brake search when going stale. */
 int nd_exec_step(nd_exec *ex, const nd_exec_cfg *cfg, double now, int stale,
                  double out[2][4]);
 

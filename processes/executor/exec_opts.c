@@ -32,6 +32,9 @@ int exec_options(int argc, char **argv, exec_opts *o) {
       {"a-max", ND_OPT_DOUBLE, &o->cfg.a_max, 1e-3, 1000.0, .arg = "M/S2",
        .help = "acceleration limit"},
       {"j-max", ND_OPT_DOUBLE, &o->cfg.j_max, 1e-3, 1e6, .arg = "M/S3", .help = "jerk limit"},
+      {"brake-a-max", ND_OPT_DOUBLE, &o->cfg.brake_a_max, 0.0, 1000.0, .arg = "M/S2",
+       .help = "acceleration limit of the brake to rest when PLAN or ROBOT_STATE goes stale, "
+               "where an arm's joints take less than --a-max (0: --a-max)"},
       {"workspace", ND_OPT_BOX, &ws, .help = ws_help},
       {"lcm-url", ND_OPT_STRING, &o->url, .arg = "URL",
        .def = "$LCM_DEFAULT_URL, else " NDP_DEFAULT_URL, .help = "LCM URL"},

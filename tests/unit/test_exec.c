@@ -113,6 +113,15 @@ static void test_cfg(void **state) {
   cfg.ws_margin = -0.01;
   assert_int_equal(nd_exec_cfg_check(&cfg, err, sizeof err), ND_EXEC_EINVAL);
   assert_non_null(strstr(err, "margin"));
+  /* Brakes at a_max unless brake_a_max says less; it cannot be negative or NaN. */
+  cfg = nd_exec_cfg_default();
+  assert_true(cfg.brake_a_max == 0.0);
+  const double bad_brake[2] = {-1.0, NAN};
+  for (int i = 0; i < 2; i++) {
+    cfg.brake_a_max = bad_brake[i];
+    assert_int_equal(nd_exec_cfg_check(&cfg, err, sizeof err), ND_EXEC_EINVAL);
+    assert_non_null(strstr(err, "brake_a_max"));
+  }
   assert_string_equal(nd_exec_mode_name(ND_EXEC_HOLD), "holding");
 }
 
@@ -150,6 +159,52 @@ static void test_bounds(void **state) {
   printf("exec_bound_slack_v %.4f %%\nexec_bound_slack_a %.4f %%\nexec_bound_slack_j %.4f %%\n",
          100 * worst_slack[0], 100 * worst_slack[1], 100 * worst_slack[2]);
   for (int k = 0; k < 3; k++) assert_true(worst_slack[k] < 0.05);
+}
+
+/* brake_a_max bounds the brake begun when the inputs go stale, while the tracking segment
+ * and the brake planned after it keep a_max: the stale brake departs where the segment's
+ * own acceleration is within the cap. */
+static void test_brake_cap(void **state) {
+  (void)state;
+  nd_exec_cfg cfg = wide();
+  cfg.a_max = 6.0, cfg.brake_a_max = 2.0;
+  nd_exec ex;
+  const double p[2] = {0.0, 0.0}, key[4] = {0.4, 0.0, 1.0, 0.0};
+  char err[128];
+  nd_exec_init(&ex, p, 0.0);
+  assert_int_equal(nd_exec_plan(&ex, &cfg, 0.0, key, 0.3, err, sizeof err), ND_EXEC_OK);
+  /* The planned brake from (1 m/s, 0, 0): the min-snap stop's 15/8 v / a at a_max. */
+  assert_near(ex.brake.T, 1.875 * 1.0 / 6.0, 0.01 * 1.875 / 6.0);
+  const double t_rest_planned = ex.t_brake + ex.brake.T;
+  double out[2][4], seg_a = 0.0, brake_a = 0.0, t_stale = 0.0;
+  for (double t = 0.0; t < ex.t_brake; t += 1e-3) {
+    nd_exec_eval(&ex, t, out);
+    if (comp(out, ND_A) > seg_a) seg_a = comp(out, ND_A), t_stale = t;
+  }
+  assert_true(seg_a > 3.0 && seg_a <= 6.0);
+  /* Stale where the segment accelerates hardest, beyond the cap: no brake departs there. */
+  double t = 0.0;
+  int mode = ND_EXEC_TRACK;
+  for (; mode != ND_EXEC_HOLD; t += 1e-3) {
+    mode = nd_exec_step(&ex, &cfg, t, t >= t_stale, out);
+    if (t >= ex.t_brake) brake_a = fmax(brake_a, comp(out, ND_A));
+  }
+  printf("exec_brake_cap: segment up to %.2f m/s^2, stale at %.3f s, brake from %.3f s up to "
+         "%.3f m/s^2 (cap 2), rest at %.3f s (planned %.3f s)\n", seg_a, t_stale, ex.t_brake,
+         brake_a, t, t_rest_planned);
+  assert_true(brake_a > 1.5 && brake_a <= 2.0);
+  assert_true(ex.t_brake > t_stale && t < t_rest_planned + 1.875 * 1.0 / 2.0);
+  /* Without the cap the same stale brake decelerates harder. */
+  cfg.brake_a_max = 0.0;
+  nd_exec_init(&ex, p, 0.0);
+  assert_int_equal(nd_exec_plan(&ex, &cfg, 0.0, key, 0.3, err, sizeof err), ND_EXEC_OK);
+  double free_a = 0.0;
+  mode = ND_EXEC_TRACK;
+  for (t = 0.0; mode != ND_EXEC_HOLD; t += 1e-3) {
+    mode = nd_exec_step(&ex, &cfg, t, t >= t_stale, out);
+    if (t >= ex.t_brake) free_a = fmax(free_a, comp(out, ND_A));
+  }
+  assert_true(free_a > 2.5);
 }
 
 static void test_init_holds(void **state) {
@@ -734,6 +789,7 @@ int main(void) {
       cmocka_unit_test(test_reaches_key),
       cmocka_unit_test(test_stretches),
       cmocka_unit_test(test_brake_from_full_speed),
+      cmocka_unit_test(test_brake_cap),
       cmocka_unit_test(test_random_switching),
       cmocka_unit_test(test_pushing_switching),
       cmocka_unit_test(test_resume),

@@ -1,7 +1,9 @@
 /* test_panda: the emulated Panda's model, kinematics, IK, control and reflexes. */
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "nd_exec.h"
 #include "nd_math.h"
 #include "nd_snap.h"
 #include "nd_test.h"
@@ -335,6 +337,82 @@ static void test_reach_lab_caps(void **state) {
                 "%d, along y at %d of %d points\n", ok_x, ok_y, n);
   assert_true(2 * ok_y > n);
   assert_true(2 * ok_x < n);
+  nds_reach_free(&r);
+}
+
+/* The largest arm load (nds_reach_load) over the brakes to rest an executor with cfg takes
+ * when its plans stop coming: segments through the points of a 4 cm grid over the lab box,
+ * along +-x and +-y at 0.2-0.6 m/s, stale where the sphere passes the point; *over counts
+ * the brakes beyond a joint limit. Only the brake is scored: its segment is the planner's,
+ * checked against the arm there. */
+static double stale_brake_load(const nds_reach *r, const nd_exec_cfg *cfg, int *over, int *n) {
+  const double dirs[4][2] = {{1, 0}, {-1, 0}, {0, 1}, {0, -1}};
+  double worst = 0.0;
+  char err[256];
+  *over = *n = 0;
+  for (double x = -0.12; x <= 0.12 + 1e-9; x += 0.04)
+    for (double y = -0.26; y <= 0.36 + 1e-9; y += 0.04)
+      for (int d = 0; d < 4; d++)
+        for (double v = 0.2; v <= 0.6 + 1e-9; v += 0.2) {
+          const double u[2] = {dirs[d][0], dirs[d][1]};
+          const double p0[2] = {x - 0.1 * u[0], y - 0.1 * u[1]};
+          const double key[4] = {x + 0.1 * u[0], y + 0.1 * u[1], v * u[0], v * u[1]};
+          nd_exec ex;
+          nd_exec_init(&ex, p0, 0.0);
+          if (nd_exec_keys_check(cfg, (const double(*)[4])key, 1, NULL, 0) != ND_EXEC_OK ||
+              nd_exec_keys_check(cfg, (const double(*)[4])p0, 1, NULL, 0) != ND_EXEC_OK ||
+              nd_exec_plan(&ex, cfg, 0.0, key, 0.6, err, sizeof err) != ND_EXEC_OK)
+            continue;
+          double sp[2][4], t_stale = 0.0, nearest = INFINITY;
+          for (double t = 0.0; t < ex.seg.T; t += 1e-3) {
+            nd_exec_eval(&ex, t, sp);
+            const double dist = hypot(sp[0][ND_P] - x, sp[1][ND_P] - y);
+            if (dist < nearest) nearest = dist, t_stale = t;
+          }
+          double load = 0.0;
+          for (double t = 0.0; t <= t_stale + 2.0; t += 1e-3) {
+            const int mode = nd_exec_step(&ex, cfg, t, t >= t_stale, sp);
+            if (t >= t_stale && t >= ex.t_brake) {
+              const double p[2] = {sp[0][ND_P], sp[1][ND_P]}, vel[2] = {sp[0][ND_V], sp[1][ND_V]},
+                           acc[2] = {sp[0][ND_A], sp[1][ND_A]};
+              load = fmax(load, nds_reach_load(r, p, vel, acc));
+            }
+            if (mode == ND_EXEC_HOLD) break;
+          }
+          (*n)++;
+          *over += load > 1.0;
+          worst = fmax(worst, load);
+        }
+  return worst;
+}
+
+/* The lab executor's stale brakes keep to the arm's joint limits (nudge-up's LAB_EXEC_V
+ * 0.65 m/s, LAB_EXEC_A 2.8 m/s^2, LAB_EXEC_BRAKE_A 2.0 m/s^2; decisions#brake-cap): at the
+ * Cartesian a_max a radial brake from 0.6 m/s loads joint 2 past its acceleration limit,
+ * at the cap none does (near the box's wall the brake planned at a_max, the one inside its
+ * margin, comes nearest). */
+static void test_stale_brake_lab(void **state) {
+  (void)state;
+  nds_reach r;
+  char err[256];
+  const double lo[2] = {NDS_PANDA_WS_XMIN, NDS_PANDA_WS_YMIN},
+               hi[2] = {NDS_PANDA_WS_XMAX, NDS_PANDA_WS_YMAX};
+  if (nds_reach_build_ws(&r, lo, hi, err, sizeof err)) fail_msg("%s", err);
+  nd_exec_cfg cfg = nd_exec_cfg_default();
+  cfg.v_max = 0.65, cfg.a_max = 2.8;
+  for (int k = 0; k < 2; k++) cfg.ws_lo[k] = lo[k], cfg.ws_hi[k] = hi[k];
+  int over, n;
+  const double uncapped = stale_brake_load(&r, &cfg, &over, &n);
+  print_message("stale_brake_lab: brakes at a_max 2.8: %d of %d beyond a joint limit, worst "
+                "load %.3f\n", over, n, uncapped);
+  assert_true(over > 0 && uncapped > 1.2);
+  cfg.brake_a_max = 2.0;
+  const double capped = stale_brake_load(&r, &cfg, &over, &n);
+  print_message("stale_brake_lab: brakes at 2.0: %d of %d beyond, worst load %.3f\n", over, n,
+                capped);
+  assert_true(n > 500);
+  assert_int_equal(over, 0);
+  assert_true(capped <= 1.0);
   nds_reach_free(&r);
 }
 
@@ -849,6 +927,7 @@ int main(void) {
       cmocka_unit_test(test_reflex_kinds),
       cmocka_unit_test(test_reach_map),
       cmocka_unit_test(test_reach_lab_caps),
+      cmocka_unit_test(test_stale_brake_lab),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
