@@ -65,6 +65,10 @@ nd_exec_cfg nd_exec_cfg_default(void) {
 
 static int pos_finite(double x) { return isfinite(x) && x > 0.0; }
 
+double nd_exec_stale_brake_a(const nd_exec_cfg *cfg) {
+  return cfg->brake_a_max > 0.0 ? fmin(cfg->a_max, cfg->brake_a_max) : cfg->a_max;
+}
+
 int nd_exec_cfg_check(const nd_exec_cfg *cfg, char *err, int errlen) {
   const char *msg = NULL;
   if (!pos_finite(cfg->v_max) || !pos_finite(cfg->a_max) || !pos_finite(cfg->j_max))
@@ -295,8 +299,7 @@ static int fit(const nd_exec_cfg *cfg, const double s0[2][4], const double *p1,
 static int brake_fit(const nd_exec_cfg *limits, int capped, const double s[2][4],
                      nd_snap_seg *seg, double hold[2]) {
   nd_exec_cfg braking = *limits;
-  if (capped && limits->brake_a_max > 0.0)
-    braking.a_max = fmin(limits->a_max, limits->brake_a_max);
+  if (capped) braking.a_max = nd_exec_stale_brake_a(limits);
   const nd_exec_cfg *cfg = &braking;
   int moving = 0;
   for (int ax = 0; ax < 2; ax++)

@@ -87,6 +87,10 @@ typedef struct {
  * 0.01 s, t_max 2 s, stretch 1.1, n_check 64; workspace [-0.5, 0.5]^2 m, margin 0.04 m. */
 nd_exec_cfg nd_exec_cfg_default(void);
 
+/* The acceleration bound of the brake begun when the inputs go stale: brake_a_max where
+ * set and below a_max, else a_max. */
+double nd_exec_stale_brake_a(const nd_exec_cfg *cfg);
+
 /* Check cfg (finite positive limits, brake_a_max finite and >= 0, t_min < t_max, stretch
  * > 1, n_check >= 2, a finite workspace with lo < hi, margin finite and >= 0).
  * Returns ND_EXEC_OK or ND_EXEC_EINVAL with a message in err. */
@@ -126,8 +130,9 @@ int nd_exec_heading_to(const nd_exec *ex, double now, const double key[4], doubl
 
 /* Setpoint at time now into out[axis][p, v, a, j]; returns the mode. If stale is
  * nonzero in mode TRACK, commits to stopping: of a few candidate brake departures from
- * now to the segment's end (usually now wins), the one reaching rest first within the
- * limits, brake_a_max and the workspace margin, else the brake planned at the end. A
+ * now to the segment's end (now, unless the segment accelerates beyond brake_a_max there),
+ * the one reaching rest first within the limits, brake_a_max and the workspace margin, else
+ * the brake planned at the end. A
  * non-finite now or one before the last call is treated as the last call's time. No
  * allocation; O(1) except the one brake search when going stale. */
 int nd_exec_step(nd_exec *ex, const nd_exec_cfg *cfg, double now, int stale,

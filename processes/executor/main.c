@@ -8,7 +8,6 @@
  * write that wakes this thread to publish at once: polling the ring instead would add up
  * to a period of latency to every setpoint. */
 #include <errno.h>
-#include <math.h>
 #include <poll.h>
 #include <stdio.h>
 #include <string.h>
@@ -79,7 +78,7 @@ int main(int argc, char **argv) {
                "(stale brake %g), j_max %g m/s^3, "
                "workspace x [%g, %g] y [%g, %g] m (+%g m for segments), lcm %s, %s\n",
           rc.rate, timeout, o.plan_timeout, cfg.v_max, cfg.a_max,
-          cfg.brake_a_max > 0.0 ? fmin(cfg.brake_a_max, cfg.a_max) : cfg.a_max, cfg.j_max,
+          nd_exec_stale_brake_a(&cfg), cfg.j_max,
           cfg.ws_lo[0], cfg.ws_hi[0],
           cfg.ws_lo[1], cfg.ws_hi[1], cfg.ws_margin, ndp_url(url), how);
 

@@ -116,6 +116,11 @@ static void test_cfg(void **state) {
   /* Brakes at a_max unless brake_a_max says less; it cannot be negative or NaN. */
   cfg = nd_exec_cfg_default();
   assert_true(cfg.brake_a_max == 0.0);
+  assert_near(nd_exec_stale_brake_a(&cfg), cfg.a_max, 0.0);
+  cfg.brake_a_max = 2.0;
+  assert_near(nd_exec_stale_brake_a(&cfg), 2.0, 0.0);
+  cfg.brake_a_max = 2.0 * cfg.a_max;
+  assert_near(nd_exec_stale_brake_a(&cfg), cfg.a_max, 0.0);
   const double bad_brake[2] = {-1.0, NAN};
   for (int i = 0; i < 2; i++) {
     cfg.brake_a_max = bad_brake[i];
