@@ -3,6 +3,8 @@
 
 #include <math.h>
 
+#include "nd_math.h"
+
 /* Default weights. Positions in metres: L_pos and L_prox in m^2 (a 10 cm error is 1e-2),
  * L_rot in [0, 1], L_acc in (m/s^2)^2 (a 10 cm rest-to-rest move in 0.3 s: mean |a|^2 31).
  * w_rot = 2e-2, the paper's lambda1: a 90 degree yaw error weighs like 14 cm of position.
@@ -57,17 +59,102 @@ double nd_cost_edge(const nd_cost_weights *w, const nd_goal *goal, const double 
   return e;
 }
 
+/* Whether the segment p-q (box frame) passes through the open rectangle |x| < h[0],
+ * |y| < h[1]: Liang-Barsky clipping to both slabs, a touch along a side not counted. */
+static int round_blocked(const double p[2], const double q[2], const double h[2]) {
+  double t0 = 0.0, t1 = 1.0;
+  for (int k = 0; k < 2; k++) {
+    const double d = q[k] - p[k];
+    if (fabs(d) < 1e-12) {
+      if (!(fabs(p[k]) < h[k])) return 0;
+      continue;
+    }
+    double a = (-h[k] - p[k]) / d, b = (h[k] - p[k]) / d;
+    if (a > b) {
+      const double t = a;
+      a = b;
+      b = t;
+    }
+    t0 = fmax(t0, a);
+    t1 = fmin(t1, b);
+    if (t1 - t0 <= 1e-9) return 0;
+  }
+  return 1;
+}
+
+double nd_cost_round_way(const nd_cost_round *r, const double box[3], const double from[2],
+                         const double to[2]) {
+  enum { FROM, TO, NV = 6 };
+  const double c = cos(box[2]), s = sin(box[2]), grow = r->radius + ND_COST_ROUND_MARGIN;
+  const double h[2] = {r->half[0] + grow, r->half[1] + grow};
+  const double straight = nd_dist2(from, to);
+  /* Vertices: the two ends and the grown box's corners, in the box's frame (p) and the
+   * world's (w). Corners sit a hair outside, so a way along a side is not blocked. */
+  double p[NV][2], w[NV][2];
+  int usable[NV];
+  const double *end[2] = {from, to};
+  double out = 0.0;
+  for (int i = FROM; i <= TO; i++) {
+    const double dx = end[i][0] - box[0], dy = end[i][1] - box[1];
+    p[i][0] = c * dx + s * dy;
+    p[i][1] = -s * dx + c * dy;
+    if (i == TO && fabs(p[i][0]) < r->half[0] + r->radius &&
+        fabs(p[i][1]) < r->half[1] + r->radius)
+      return straight;
+    const double in0 = h[0] - fabs(p[i][0]), in1 = h[1] - fabs(p[i][1]);
+    if (in0 > 0.0 && in1 > 0.0) {
+      const int ax = in0 <= in1 ? 0 : 1;
+      out += ax == 0 ? in0 : in1;
+      p[i][ax] = copysign(h[ax] * (1.0 + 1e-6), p[i][ax]);
+    }
+    usable[i] = 1;
+  }
+  if (!round_blocked(p[FROM], p[TO], h)) return straight;
+  for (int k = 0; k < 4; k++) {
+    p[2 + k][0] = (k & 1 ? 1.0 : -1.0) * h[0] * (1.0 + 1e-6);
+    p[2 + k][1] = (k & 2 ? 1.0 : -1.0) * h[1] * (1.0 + 1e-6);
+  }
+  for (int i = 0; i < NV; i++) {
+    w[i][0] = box[0] + c * p[i][0] - s * p[i][1];
+    w[i][1] = box[1] + s * p[i][0] + c * p[i][1];
+    if (i > TO)
+      usable[i] = w[i][0] >= r->lo[0] && w[i][0] <= r->hi[0] && w[i][1] >= r->lo[1] &&
+                  w[i][1] <= r->hi[1];
+  }
+  /* Dijkstra on the six vertices, an edge wherever the grown box does not block it. */
+  double dist[NV];
+  int done[NV] = {0};
+  for (int i = 0; i < NV; i++) dist[i] = INFINITY;
+  dist[FROM] = 0.0;
+  for (;;) {
+    int u = -1;
+    for (int i = 0; i < NV; i++)
+      if (usable[i] && !done[i] && isfinite(dist[i]) && (u < 0 || dist[i] < dist[u])) u = i;
+    if (u < 0 || u == TO) break;
+    done[u] = 1;
+    for (int v = 0; v < NV; v++)
+      if (usable[v] && !done[v] && !round_blocked(p[u], p[v], h))
+        dist[v] = fmin(dist[v], dist[u] + nd_dist2(w[u], w[v]));
+  }
+  return isfinite(dist[TO]) ? dist[TO] + out : straight;
+}
+
 /* L_prox over the horizon, not at its end: a candidate that reaches the lead point at the
  * horizon's end scores like one that gets there at once, and the receding horizon then
  * puts the sphere's arrival off at every re-plan (doc/decisions.md#prox-mean). */
 double nd_cost_plan(const nd_cost_weights *w, const nd_goal *goal, double task,
                     const double (*obj_at)[3], const double (*ee_at)[2], int n,
-                    double acc_sq_mean) {
+                    double acc_sq_mean, const nd_cost_round *round) {
   double prox = 0.0;
   for (int k = 0; k < n; k++) {
     double lead[2];
     nd_cost_lead_point(w->prox_lead, goal, obj_at[k], lead);
-    prox += nd_cost_prox(lead, ee_at[k]);
+    if (round) {
+      const double d = nd_cost_round_way(round, obj_at[k], ee_at[k], lead);
+      prox += d * d;
+    } else {
+      prox += nd_cost_prox(lead, ee_at[k]);
+    }
   }
   return task + w->w_prox * prox / (n > 0 ? n : 1) + w->w_acc * acc_sq_mean;
 }

@@ -40,13 +40,33 @@ void nd_cost_lead_point(double lead, const nd_goal *goal, const double obj_xy[2]
 double nd_cost_edge(const nd_cost_weights *w, const nd_goal *goal, const double obj_xy[2],
                     const double lo[2], const double hi[2]);
 
+/* What L_prox needs to measure the way round the object: the box's half sides, the
+ * sphere's radius and the box [lo, hi] the sphere's centre keeps to (its keypoints'). */
+typedef struct {
+  double half[2], radius, lo[2], hi[2];
+} nd_cost_round;
+
+/* Clearance (m) the way round keeps beyond the sphere's radius: an arm tracks its setpoint
+ * some millimetres off, and a sphere grazing a side turns the box. */
+#define ND_COST_ROUND_MARGIN 0.005
+
+/* Length (m) of the shortest way for the sphere's centre from `from` to `to` round the
+ * object at box = (x, y, yaw): outside the box grown by radius + ND_COST_ROUND_MARGIN,
+ * turning only at the grown box's corners within [lo, hi]. An end within the grown box
+ * leaves it through the nearest side, that part counted. Straight when the line is clear,
+ * when `to` lies where the sphere cannot be (the box grown by the radius: near the goal the
+ * lead point fades into the object) or when no way round keeps within [lo, hi]. */
+double nd_cost_round_way(const nd_cost_round *r, const double box[3], const double from[2],
+                         const double to[2]);
+
 /* E of a rollout without L_edge: the task term `task` (the paper's nd_task_error of the
  * final state, or nd_cost_arrival), L_prox as the mean over the rollout's n samples of the
- * object obj_at[k] = (x, y, yaw) and the sphere ee_at[k] (each from its lead point), and
- * L_acc = acc_sq_mean, the mean of |a_ee|^2 over its steps. */
+ * object obj_at[k] = (x, y, yaw) and the sphere ee_at[k] (each from its lead point; squared
+ * straight, or with round the squared nd_cost_round_way), and L_acc = acc_sq_mean, the
+ * mean of |a_ee|^2 over its steps. round NULL: straight, the paper's. */
 double nd_cost_plan(const nd_cost_weights *w, const nd_goal *goal, double task,
                     const double (*obj_at)[3], const double (*ee_at)[2], int n,
-                    double acc_sq_mean);
+                    double acc_sq_mean, const nd_cost_round *round);
 
 /* The task term by arrival at eps (a threshold to aim at, e.g. a share of the goal's),
  * from the object's poses at[k] = (x, y, yaw) at (k + 1) / n of the horizon (at[n - 1] the

@@ -37,6 +37,7 @@ struct nds_planner {
   double seen_cost;
   double seen_x[4 * ND_MAX_KEYS];
   nds_rollout_out seen_out;
+  nd_cost_round round;       /* L_prox's way round the object (cfg.prox_round) */
 };
 
 void nds_planner_cfg_default(nds_planner_cfg *cfg) {
@@ -250,7 +251,7 @@ static int plan_cost(void *ctx, const double *x, int n, double *cost) {
               ? nd_cost_arrival(&c->w, p->goal, c->arrival * p->goal->eps, o->obj_at, NDS_ROLLOUT_NS)
               : nd_task_error(&c->w, p->goal, o->obj_xy, o->obj_yaw);
       cost[i] = nd_cost_plan(&c->w, p->goal, task, o->obj_at, o->ee_at, NDS_ROLLOUT_NS,
-                             o->acc_sq_mean) +
+                             o->acc_sq_mean, c->prox_round ? &p->round : NULL) +
                 c->w.w_edge * nd_cost_edge(&c->w, p->goal, o->obj_xy, c->ws_lo, c->ws_hi);
     }
     /* The best rollout so far, so the plan's prediction needs no rollout of its own. */
@@ -341,6 +342,12 @@ nds_planner *nds_planner_create(const nds_model *model, const nds_planner_cfg *c
     return NULL;
   }
   nds_batch_set_free_flight(p->batch, cfg->free_flight);
+  for (int k = 0; k < 2; k++) {
+    p->round.half[k] = model->cfg.obj_half[k];
+    p->round.lo[k] = cfg->ws_lo[k];
+    p->round.hi[k] = cfg->ws_hi[k];
+  }
+  p->round.radius = model->cfg.ee_radius;
   nd_rng_seed(&p->rng, cfg->seed, 0);
   return p;
 }

@@ -30,6 +30,9 @@ typedef struct {
   double arrival;           /* > 0: the task term by arrival (nd_cost_arrival) at this share
                              * of the goal's eps; 0, the default: the final state's error,
                              * the paper's */
+  int prox_round;           /* L_prox measured round the object, clear of its sides
+                             * (nd_cost_round_way); 0, the default: straight, as the paper
+                             * measures */
   nds_ctrl_cfg ctrl;
   int free_flight;          /* rollouts skip MuJoCo while the sphere is far from the object
                              * (nds_rollout_ff); 1 by default */

@@ -15,6 +15,7 @@ int main(int argc, char **argv) {
                     .max_rate = 40.0, .state_timeout = 0.1, .lead = 1, .release = 0.01};
   static const char *const lead_words[] = {"off", "on", NULL};
   static const char *const arm_words[] = {"none", "panda", NULL};
+  static const char *const prox_words[] = {"straight", "round", NULL};
   int arm = 0;
   /* 10 ms, not the demo's 5 ms: on one core it plans at ~19 Hz while pushing, above the
    * 10 Hz the executor's 0.1 s plan timeout needs; 5 ms did not reach that. Its cost in
@@ -50,6 +51,12 @@ int main(int argc, char **argv) {
        .help = "score a plan that meets F times the task's eps within the horizon, and stays "
                "within it, by when it gets there (F below 1 leaves room for the model's "
                "error); 0 scores the horizon's end alone (the paper's cost)"},
+      {"prox-way", ND_OPT_CHOICE, &pc.prox_round, .choices = prox_words,
+       .arg = "straight|round", .def = "straight",
+       .help = "how the cost's proximity term measures the sphere's way to where a push "
+               "starts: straight, as the paper does, or round the object, 5 mm clear of its "
+               "sides and turning only within --workspace, which finds the way round a box "
+               "whose near end is beyond reach (nudge-up --world lab sets round)"},
       {"lead", ND_OPT_CHOICE, &o.lead, .choices = lead_words, .arg = "on|off", .def = "on",
        .help = "latency compensation: plan from the state predicted for when the plan will "
                "reach the executor (the executor's committed trajectory from EE_CMD), and "
@@ -148,11 +155,11 @@ int main(int argc, char **argv) {
 
   fprintf(stderr,
           PROG ": %s, iCEM N %d C %d, M %d, T %.2f s, plan dt %.4f s (%s contact), %d worker(s), max %.1f "
-          "plans/s, lead %s, arrival %g, arm %s (load <= %g), redraws %d, state timeout %.3f s, theta (%g, %g, %g, %g), seed %llu, keypoints in "
+          "plans/s, lead %s, arrival %g, proximity %s, arm %s (load <= %g), redraws %d, state timeout %.3f s, theta (%g, %g, %g, %g), seed %llu, keypoints in "
           "x [%g, %g] y [%g, %g] m, v_max %g m/s, a_max %g m/s^2\n",
           ndp_url(o.url), o.pop, o.iters, pc.M, pc.T, o.plan_dt,
           calibrated ? "calibrated" : "the world's", o.threads, o.max_rate,
-          lead_words[o.lead], pc.arrival, arm_words[arm], pc.reach_max, pc.redraws, o.state_timeout, o.theta[0], o.theta[1], o.theta[2], o.theta[3],
+          lead_words[o.lead], pc.arrival, prox_words[pc.prox_round], arm_words[arm], pc.reach_max, pc.redraws, o.state_timeout, o.theta[0], o.theta[1], o.theta[2], o.theta[3],
           (unsigned long long)o.seed, pc.ws_lo[0], pc.ws_hi[0], pc.ws_lo[1], pc.ws_hi[1],
           pc.v_max, pc.a_max);
 

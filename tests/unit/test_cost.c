@@ -2,6 +2,7 @@
 #include "nd_test.h"
 
 #include "nd_cost.h"
+#include "nd_math.h"
 
 static void test_known_values(void **state) {
   (void)state;
@@ -18,18 +19,18 @@ static void test_known_values(void **state) {
   const double obj_at[1][3] = {{obj[0], obj[1], yaw}}, ee_at[1][2] = {{ee[0], ee[1]}};
   const double task = nd_task_error(&w, &g, obj, yaw);
   assert_near(task, 0.25 + 0.1 * 0.25, 1e-15);
-  assert_near(nd_cost_plan(&w, &g, task, obj_at, ee_at, 1, 40.0),
+  assert_near(nd_cost_plan(&w, &g, task, obj_at, ee_at, 1, 40.0, NULL),
               0.25 + 0.1 * 0.25 + 0.01 * 0.0025 + 0.001 * 40.0, 1e-15);
   /* Each weight scales only its own term. */
   nd_cost_weights w2 = w;
   w2.w_acc = 0.0;
-  assert_near(nd_cost_plan(&w, &g, task, obj_at, ee_at, 1, 40.0) -
-                  nd_cost_plan(&w2, &g, task, obj_at, ee_at, 1, 40.0),
+  assert_near(nd_cost_plan(&w, &g, task, obj_at, ee_at, 1, 40.0, NULL) -
+                  nd_cost_plan(&w2, &g, task, obj_at, ee_at, 1, 40.0, NULL),
               0.04, 1e-15);
   w2 = w;
   w2.w_prox = 0.0;
-  assert_near(nd_cost_plan(&w, &g, task, obj_at, ee_at, 1, 40.0) -
-                  nd_cost_plan(&w2, &g, task, obj_at, ee_at, 1, 40.0),
+  assert_near(nd_cost_plan(&w, &g, task, obj_at, ee_at, 1, 40.0, NULL) -
+                  nd_cost_plan(&w2, &g, task, obj_at, ee_at, 1, 40.0, NULL),
               0.01 * 0.0025, 1e-15);
 }
 
@@ -43,15 +44,15 @@ static void test_prox_over_horizon(void **state) {
   const double obj_at[4][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
   const double soon[4][2] = {{-0.12, 0}, {-0.08, 0}, {-0.08, 0}, {-0.08, 0}};
   const double late[4][2] = {{-0.20, 0}, {-0.16, 0}, {-0.12, 0}, {-0.08, 0}};
-  const double c_soon = nd_cost_plan(&w, &g, 0.0, obj_at, soon, 4, 0.0);
-  const double c_late = nd_cost_plan(&w, &g, 0.0, obj_at, late, 4, 0.0);
+  const double c_soon = nd_cost_plan(&w, &g, 0.0, obj_at, soon, 4, 0.0, NULL);
+  const double c_late = nd_cost_plan(&w, &g, 0.0, obj_at, late, 4, 0.0, NULL);
   assert_near(c_soon, 0.04 * 0.04 / 4, 1e-15);
   assert_near(c_late, (0.12 * 0.12 + 0.08 * 0.08 + 0.04 * 0.04) / 4, 1e-15);
   assert_true(c_soon < c_late);
   /* The object moved half way to the goal at the last sample: so did its lead point. */
   const double moving[4][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}, {0.15, 0, 0}};
   const double behind[4][2] = {{-0.08, 0}, {-0.08, 0}, {-0.08, 0}, {0.07, 0}};
-  assert_near(nd_cost_plan(&w, &g, 0.0, moving, behind, 4, 0.0), 0.0, 1e-15);
+  assert_near(nd_cost_plan(&w, &g, 0.0, moving, behind, 4, 0.0, NULL), 0.0, 1e-15);
 }
 
 /* The lead point: behind the object on the goal's line, fading into it near the goal. */
@@ -78,8 +79,9 @@ static void test_lead_point(void **state) {
   const double obj[1][3] = {{0.8, 0.2, 0.0}};
   const double behind[1][2] = {{0.848, 0.264}}, front[1][2] = {{0.752, 0.136}};
   const double task = nd_task_error(&w, &g, obj[0], 0.0);
-  assert_near(nd_cost_plan(&w, &g, task, obj, behind, 1, 0.0), nd_cost_pos(obj[0], &g), 1e-15);
-  assert_near(nd_cost_plan(&w, &g, task, obj, front, 1, 0.0) - nd_cost_pos(obj[0], &g),
+  assert_near(nd_cost_plan(&w, &g, task, obj, behind, 1, 0.0, NULL), nd_cost_pos(obj[0], &g),
+              1e-15);
+  assert_near(nd_cost_plan(&w, &g, task, obj, front, 1, 0.0, NULL) - nd_cost_pos(obj[0], &g),
               4.0 * 0.08 * 0.08, 1e-15);
 }
 
@@ -179,6 +181,57 @@ static void test_cuboid_symmetry(void **state) {
   }
 }
 
+/* The way round the box: straight where the line is clear, round the grown box's corners
+ * where it is not, only by corners within reach, and out of the grown box first. */
+static void test_round_way(void **state) {
+  (void)state;
+  /* Box 10 x 6 cm, sphere radius 2.5 cm: grown by 3 cm, half sides 8 and 6 cm. */
+  const nd_cost_round w = {{0.05, 0.03}, 0.025, {-1, -1}, {1, 1}};
+  const double b0[3] = {0, 0, 0}, b90[3] = {0, 0, M_PI / 2};
+  const double e = 1e-5;
+  assert_near(nd_cost_round_way(&w, b0, (double[]){0.1, 0.1}, (double[]){-0.1, 0.1}), 0.2, e);
+  const double round0 = 2 * hypot(0.07, 0.06) + 0.16, round90 = 2 * hypot(0.09, 0.08) + 0.12;
+  assert_near(nd_cost_round_way(&w, b0, (double[]){0.15, 0}, (double[]){-0.15, 0}), round0, e);
+  assert_near(nd_cost_round_way(&w, b90, (double[]){0.15, 0}, (double[]){-0.15, 0}), round90, e);
+  /* The +y corners beyond reach: round the -y side, as long; both beyond: straight. */
+  nd_cost_round r = w;
+  r.hi[1] = 0.05;
+  assert_near(nd_cost_round_way(&r, b0, (double[]){0.15, 0}, (double[]){-0.15, 0}), round0, e);
+  r.lo[1] = -0.05;
+  assert_near(nd_cost_round_way(&r, b0, (double[]){0.15, 0}, (double[]){-0.15, 0}), 0.3, e);
+  /* A lead point where the sphere cannot be (faded into the object near the goal). */
+  assert_near(nd_cost_round_way(&w, b0, (double[]){0.15, 0}, (double[]){0.0, 0.0}), 0.15, e);
+  /* The sphere 5 mm inside the grown box: out to its side, then along it and round. */
+  assert_near(nd_cost_round_way(&w, b0, (double[]){0.075, 0}, (double[]){-0.15, 0}),
+              0.005 + 0.06 + 0.16 + hypot(0.07, 0.06), e);
+  /* The lab's push from the box's +x edge back (decisions#prox-round): the box at x 0.098
+   * turned 44 degrees, the goal at (0.09, 0.12), the sphere on the goal's side. Straight,
+   * the lead point is nearer from the +x end, beyond which the arm cannot reach, than from
+   * where the sphere hovers; round, it is further, and the way round the -x end nearer. */
+  const nd_cost_round lab = {{0.05, 0.03}, 0.025, {-0.15, -0.30}, {0.15, 0.40}};
+  const double box[3] = {0.098, -0.054, 44 * M_PI / 180};
+  nd_goal g = {.x = 0.09, .y = 0.12, .yaw = 0.4};
+  nd_cost_weights cw = nd_cost_weights_default();
+  double lead[2];
+  nd_cost_lead_point(cw.prox_lead, &g, box, lead);
+  const double hover[2] = {0.14, 0.02}, plus_x[2] = {0.16, -0.02}, minus_x[2] = {0.03, 0.02};
+  assert_true(nd_dist2(plus_x, lead) < nd_dist2(hover, lead));
+  assert_true(nd_dist2(minus_x, lead) > nd_dist2(hover, lead));
+  assert_true(nd_cost_round_way(&lab, box, plus_x, lead) >
+              nd_cost_round_way(&lab, box, hover, lead) + 0.05);
+  assert_true(nd_cost_round_way(&lab, box, minus_x, lead) <
+              nd_cost_round_way(&lab, box, hover, lead) - 0.1);
+  /* nd_cost_plan: L_prox the squared way round; straight where it is clear. */
+  cw.w_acc = 0.0;
+  const double obj[1][3] = {{0.098, -0.054, 44 * M_PI / 180}};
+  const double at_hover[1][2] = {{0.14, 0.02}};
+  const double d = nd_cost_round_way(&lab, box, hover, lead);
+  assert_near(nd_cost_plan(&cw, &g, 0.0, obj, at_hover, 1, 0.0, &lab), cw.w_prox * d * d, 1e-12);
+  const double at_lead[1][2] = {{lead[0], lead[1] - 0.03}};
+  assert_near(nd_cost_plan(&cw, &g, 0.0, obj, at_lead, 1, 0.0, &lab),
+              nd_cost_plan(&cw, &g, 0.0, obj, at_lead, 1, 0.0, NULL), 1e-15);
+}
+
 static void test_default_weights(void **state) {
   (void)state;
   const nd_cost_weights w = nd_cost_weights_default();
@@ -229,6 +282,7 @@ int main(void) {
       cmocka_unit_test(test_prox_over_horizon),
       cmocka_unit_test(test_arrival),
       cmocka_unit_test(test_edge),
+      cmocka_unit_test(test_round_way),
       cmocka_unit_test(test_cuboid_symmetry),
       cmocka_unit_test(test_default_weights),
       cmocka_unit_test(test_terminal_condition),
