@@ -89,7 +89,8 @@ double nd_cost_round_way(const nd_cost_round *r, const double box[3], const doub
   const double h[2] = {r->half[0] + grow, r->half[1] + grow};
   const double straight = nd_dist2(from, to);
   /* Vertices: the two ends and the grown box's corners, in the box's frame (p) and the
-   * world's (w). Corners sit a hair outside, so a way along a side is not blocked. */
+   * world's (w). They sit a hair outside it, so a way along a side is not blocked. */
+  const double hair = 1.0 + 1e-6;
   double p[NV][2], w[NV][2];
   int usable[NV];
   const double *end[2] = {from, to};
@@ -105,14 +106,14 @@ double nd_cost_round_way(const nd_cost_round *r, const double box[3], const doub
     if (in0 > 0.0 && in1 > 0.0) {
       const int ax = in0 <= in1 ? 0 : 1;
       out += ax == 0 ? in0 : in1;
-      p[i][ax] = copysign(h[ax] * (1.0 + 1e-6), p[i][ax]);
+      p[i][ax] = copysign(h[ax] * hair, p[i][ax]);
     }
     usable[i] = 1;
   }
   if (!round_blocked(p[FROM], p[TO], h)) return straight;
   for (int k = 0; k < 4; k++) {
-    p[2 + k][0] = (k & 1 ? 1.0 : -1.0) * h[0] * (1.0 + 1e-6);
-    p[2 + k][1] = (k & 2 ? 1.0 : -1.0) * h[1] * (1.0 + 1e-6);
+    p[2 + k][0] = (k & 1 ? 1.0 : -1.0) * h[0] * hair;
+    p[2 + k][1] = (k & 2 ? 1.0 : -1.0) * h[1] * hair;
   }
   for (int i = 0; i < NV; i++) {
     w[i][0] = box[0] + c * p[i][0] - s * p[i][1];

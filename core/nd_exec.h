@@ -132,9 +132,8 @@ int nd_exec_heading_to(const nd_exec *ex, double now, const double key[4], doubl
  * nonzero in mode TRACK, commits to stopping: of a few candidate brake departures from
  * now to the segment's end (now, unless the segment accelerates beyond brake_a_max there),
  * the one reaching rest first within the limits, brake_a_max and the workspace margin, else
- * the brake planned at the end. A
- * non-finite now or one before the last call is treated as the last call's time. No
- * allocation; O(1) except the one brake search when going stale. */
+ * the brake planned at the end. A non-finite now or one before the last call is treated as
+ * the last call's time. No allocation; O(1) except the one brake search when going stale. */
 int nd_exec_step(nd_exec *ex, const nd_exec_cfg *cfg, double now, int stale,
                  double out[2][4]);
 

@@ -82,12 +82,16 @@ if pt_up_wait "$RUN" 30 "$up"; then
   # task's short time limit.
   rest=$(grep -o -E '(rests at|sent clear again, to) \([^)]*\)' "$RUN/planner.log" | tail -n 1 |
     tr -d '(),' | awk '{ printf "%.3f,%.3f", $(NF - 1) + 0.04, $NF }')
-  pt_say "PLANs drive the resting sphere to (${rest:-?}) m, 4 cm on"
-  "$PT_INJ" --plan-to "${rest:-0.08,0}" --repeat 40 --gap-ms 20 >/dev/null ||
-    pt_fail "nudge-inject --plan-to failed"
-  # The object lies within a few cm of where the first task left it: at eps 1e-3
-  # (3 cm) the goal 0.3 m cannot be met at the start (such a task is not recorded), and the
-  # time lets it move the 1 cm a record needs, under ASan too.
+  if [[ -n $rest ]]; then
+    pt_say "PLANs drive the resting sphere to ($rest) m, 4 cm on"
+    "$PT_INJ" --plan-to "$rest" --repeat 40 --gap-ms 20 >/dev/null ||
+      pt_fail "nudge-inject --plan-to failed"
+  else
+    pt_fail "the planner's log says nowhere where the sphere rests"
+  fi
+  # The object lies within a few cm of where the first task left it: at eps 1e-3 (3 cm)
+  # the goal 0.3 m cannot be met at the start (such a task is not recorded), and the time
+  # lets it move the 1 cm a record needs, under ASan too.
   "$PT_BIN/nudge-tasks" --goal 0.3,0,0 --eps 1e-3 --tau "$(pt_slow 1)" \
     --record "$PT_WORK/clear.nrb" \
     >"$PT_WORK/clear-rec.out" 2>&1 || pt_fail "nudge-tasks --record failed: $(tail -n 3 "$PT_WORK/clear-rec.out")"
