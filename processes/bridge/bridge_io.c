@@ -72,14 +72,16 @@ static void use_task(void *user, const nudge_task_t *msg) {
 }
 
 /* A PLACE goes to the loop once per place_id (it is re-sent until the object is seen
- * there). A new one also releases an arm a reflex stopped, as a new task does: resetting
- * the scene acknowledges the error, and the sphere has to move clear of the pose before
- * the object can be put there. */
+ * there), even when its re-sending outlasts a newer PLACE. A new one also releases an arm
+ * a reflex stopped, as a new task does: resetting the scene acknowledges the error, and
+ * the sphere has to move clear of the pose before the object can be put there. */
 static void use_place(void *user, const nudge_place_t *msg) {
   bridge_io *io = user;
   io->st.received++;
-  if (msg->place_id == io->place_id) return;
-  io->place_id = msg->place_id;
+  for (int k = 0; k < BRIDGE_PLACE_SEEN; k++)
+    if (io->place_seen[k] == msg->place_id) return;
+  io->place_seen[io->place_next] = msg->place_id;
+  io->place_next = (io->place_next + 1) % BRIDGE_PLACE_SEEN;
   const bridge_place pl = {msg->place_id, {msg->x, msg->y, msg->yaw}, msg->clear, ndp_mono()};
   nd_mailbox_post(&io->b->place, &pl, sizeof(pl));
   atomic_fetch_add(&io->b->resume_req, 1);
@@ -90,7 +92,9 @@ NDP_INPUT(nudge_place_t, ndp_check_place, on_place_raw, use_place, refuse)
 NDP_INPUT(nudge_task_t, ndp_check_task, on_task_raw, use_task, refuse)
 
 int bridge_io_subscribe(bridge_io *io, lcm_t *lcm, char *err, int errlen) {
-  io->task_id = io->place_id = -1;
+  io->task_id = -1;
+  for (int k = 0; k < BRIDGE_PLACE_SEEN; k++) io->place_seen[k] = -1;
+  io->place_next = 0;
   if (!lcm_subscribe(lcm, NDP_CH_EE_CMD, on_ee_cmd_raw, io) ||
       !lcm_subscribe(lcm, NDP_CH_TASK, on_task_raw, io) ||
       !lcm_subscribe(lcm, NDP_CH_PLACE, on_place_raw, io)) {

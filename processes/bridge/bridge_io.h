@@ -14,6 +14,10 @@
  * the two were given the box in different digits. */
 #define BRIDGE_WS_MARGIN 0.05
 
+/* PLACE ids remembered as taken: a sender re-sends its PLACE until it sees the object
+ * there, so a re-sent one can arrive after a newer PLACE and must not undo it. */
+#define BRIDGE_PLACE_SEEN 8
+
 typedef struct {
   bridge_loop *b;
   nd_box ws;                /* EE_CMD beyond it + BRIDGE_WS_MARGIN is refused */
@@ -27,7 +31,8 @@ typedef struct {
   int64_t resets_said, skipped_said, stops_said, silent_said;
   double reset_said_at, skip_said_at, silent_said_at;
   int64_t task_id;          /* the newest TASK seen; -1 none */
-  int64_t place_id;         /* the newest PLACE seen; -1 none */
+  int64_t place_seen[BRIDGE_PLACE_SEEN];  /* the PLACE ids taken, newest at place_next - 1 */
+  int place_next;
   int64_t places_said, dropped_said;
   char state[64];           /* the heartbeat's state word ("stopped: joint 4 velocity") */
 } bridge_io;

@@ -270,6 +270,21 @@ pt_check "moved3: tasks_recorded 0" test "$(figure tasks_recorded "$PT_WORK/move
 pt_check "moved3: the buffer still holds the one record of section 4 (got $(records "$PBUF"))" \
   test "$(records "$PBUF")" = 1
 
+# A sender re-sends its PLACE until it sees the object there, so a re-send can arrive after
+# a newer PLACE (the bump above). The bridge must not carry the older one out again.
+last_id=$(sed -n 's/^nudge-bridge: PLACE \([0-9]*\): the object placed at (+0.000, +0.000) m.*/\1/p' \
+  "$BLOG" | tail -n 1)
+n1=$(n_origin)
+n_placed() { grep -c ': the object placed at' "$BLOG"; }
+p1=$(n_placed)
+out=$("$PT_INJ" --place-at 0,0,0 --place-id "${last_id:-1}" 2>&1) ||
+  pt_fail "nudge-inject --place-id failed: $out"
+sleep 2
+pt_check "resent: the runner's last PLACE was found in the bridge log (id ${last_id:-none})" \
+  test -n "$last_id"
+pt_check "resent: the bridge did not place the object again for a re-sent PLACE (placements $p1 -> $(n_placed))" \
+  test "$(n_placed)" -eq "$p1" -a "$(n_origin)" -eq "$n1"
+
 # --- the system is unharmed --------------------------------------------------------------
 pt_up_stop "$up" 30
 pt_check "nudge-up run exits 0 after SIGINT (got $PT_RC)" test "$PT_RC" -eq 0

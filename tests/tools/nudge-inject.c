@@ -54,6 +54,7 @@ typedef struct {
   double to[2];
   int place_at;        /* one valid PLACE at `at` (PLACE only): the object bumped there */
   double at[3];
+  uint64_t place_id;   /* with place_at: this id, a re-sent PLACE; 0: a new one */
   int repeat;
   double gap_s;        /* pause after each message */
   uint64_t seed;
@@ -378,6 +379,7 @@ static void inject_place(inj *j) {
   if (j->o->place_at) {
     m = ok;
     m.utime = m.place_id = wall_us();  /* a new placement: ids only increase */
+    if (j->o->place_id) m.place_id = (int64_t)j->o->place_id;
     m.x = j->o->at[0], m.y = j->o->at[1], m.yaw = j->o->at[2];
     send_ws(j, nudge_place_t_encode(j->buf, 0, MAX_MSG, &m));
   }
@@ -490,6 +492,8 @@ static void usage(FILE *f) {
           "                  and --gap-ms: a stream the executor follows)\n"
           "  --place-at X,Y,YAW  instead: one valid PLACE there, on PLACE only (an emulating\n"
           "                  bridge puts the object there: a bump between tasks)\n"
+          "  --place-id ID   with --place-at: that place_id, as a sender re-sending an\n"
+          "                  older PLACE does (default: a new one)\n"
           "  --repeat N      send everything N times, 1..10000 (default 1)\n"
           "  --gap-ms MS     pause after each message, 0..1000 ms (default 1)\n"
           "  --seed N        seed of the random garbage (default 1)\n"
@@ -522,7 +526,7 @@ static int parse_args(int argc, char **argv, inj_opts *o) {
     }
     if (strcmp(a, "--channel") && strcmp(a, "--kind") && strcmp(a, "--repeat") &&
         strcmp(a, "--gap-ms") && strcmp(a, "--seed") && strcmp(a, "--lcm-url") &&
-        strcmp(a, "--plan-to") && strcmp(a, "--place-at")) {
+        strcmp(a, "--plan-to") && strcmp(a, "--place-at") && strcmp(a, "--place-id")) {
       snprintf(err, sizeof err, "unknown argument '%s'", a);
       return bad_arg(err);
     }
@@ -553,6 +557,10 @@ static int parse_args(int argc, char **argv, inj_opts *o) {
       if (nd_parse_list(v, a, 3, -3.2, 3.2, o->at, err, sizeof err)) return bad_arg(err);
       o->bad = o->garbage = 0, o->place_at = 1;
       o->on[CH_PLACE] = 1, any = 1;
+    } else if (!strcmp(a, "--place-id")) {
+      if (nd_parse_u64(v, a, &o->place_id, err, sizeof err)) return bad_arg(err);
+      if (o->place_id < 1 || o->place_id > INT64_MAX)
+        return bad_arg("--place-id: expected 1..2^63-1");
     } else if (!strcmp(a, "--repeat")) {
       if (nd_parse_int(v, a, 1, 10000, &o->repeat, err, sizeof err)) return bad_arg(err);
     } else if (!strcmp(a, "--gap-ms")) {
