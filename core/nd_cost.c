@@ -96,9 +96,8 @@ double nd_cost_round_way(const nd_cost_round *r, const double box[3], const doub
   const double *end[2] = {from, to};
   double out = 0.0;
   for (int i = FROM; i <= TO; i++) {
-    const double dx = end[i][0] - box[0], dy = end[i][1] - box[1];
-    p[i][0] = c * dx + s * dy;
-    p[i][1] = -s * dx + c * dy;
+    const double d[2] = {end[i][0] - box[0], end[i][1] - box[1]};
+    nd_rot2(c, -s, d, p[i]);
     if (i == TO && fabs(p[i][0]) < r->half[0] + r->radius &&
         fabs(p[i][1]) < r->half[1] + r->radius)
       return straight;
@@ -116,8 +115,9 @@ double nd_cost_round_way(const nd_cost_round *r, const double box[3], const doub
     p[2 + k][1] = (k & 2 ? 1.0 : -1.0) * h[1] * hair;
   }
   for (int i = 0; i < NV; i++) {
-    w[i][0] = box[0] + c * p[i][0] - s * p[i][1];
-    w[i][1] = box[1] + s * p[i][0] + c * p[i][1];
+    nd_rot2(c, s, p[i], w[i]);
+    w[i][0] += box[0];
+    w[i][1] += box[1];
     if (i > TO)
       usable[i] = w[i][0] >= r->lo[0] && w[i][0] <= r->hi[0] && w[i][1] >= r->lo[1] &&
                   w[i][1] <= r->hi[1];

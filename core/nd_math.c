@@ -45,6 +45,12 @@ double nd_norm2(const double v[2]) { return hypot(v[0], v[1]); }
 
 double nd_dist2(const double a[2], const double b[2]) { return hypot(a[0] - b[0], a[1] - b[1]); }
 
+void nd_rot2(double c, double s, const double v[2], double out[2]) {
+  const double x = c * v[0] - s * v[1], y = s * v[0] + c * v[1];
+  out[0] = x;
+  out[1] = y;
+}
+
 double nd_clamp(double x, double lo, double hi) {
   /* NaN falls through both comparisons and stays NaN, so callers can still detect it. */
   if (x < lo) return lo;

@@ -23,6 +23,10 @@ double nd_norm2_sq(const double v[2]);
 double nd_norm2(const double v[2]);
 double nd_dist2(const double a[2], const double b[2]);
 
+/* Turn the 2-vector v by the angle of cosine c and sine s into out (out may be v): (c, s)
+ * takes a body frame's coordinates to the world's, (c, -s) the world's to the body's. */
+void nd_rot2(double c, double s, const double v[2], double out[2]);
+
 /* Clamp x to [lo, hi]. */
 double nd_clamp(double x, double lo, double hi);
 

@@ -7,9 +7,10 @@
 
 double nd_release_gap(const nd_release_box *b, double r, const double ee[2], double n[2]) {
   const double c = cos(b->yaw), s = sin(b->yaw);
-  const double wx = ee[0] - b->x, wy = ee[1] - b->y;
+  const double wd[2] = {ee[0] - b->x, ee[1] - b->y};
   /* The sphere's centre in the box's frame, and the box's nearest point to it. */
-  const double d[2] = {c * wx + s * wy, -s * wx + c * wy};
+  double d[2];
+  nd_rot2(c, -s, wd, d);
   const double q[2] = {nd_clamp(d[0], -b->half[0], b->half[0]),
                        nd_clamp(d[1], -b->half[1], b->half[1])};
   double u[2], dist;
@@ -25,8 +26,7 @@ double nd_release_gap(const nd_release_box *b, double r, const double ee[2], dou
     u[0] = (d[0] - q[0]) / dist;
     u[1] = (d[1] - q[1]) / dist;
   }
-  n[0] = c * u[0] - s * u[1];
-  n[1] = s * u[0] + c * u[1];
+  nd_rot2(c, s, u, n);
   return dist - r;
 }
 

@@ -77,10 +77,10 @@ void nds_world_cfg_lab(nds_world_cfg *cfg) {
 /* The sphere must start clear of the box, or the first contact throws the object. */
 static int check_start(const nds_world_cfg *c, double ee_radius, char *err, int errlen) {
   const double *h = c->object.obj_half;
-  const double dx = c->ee[0] - c->obj[0], dy = c->ee[1] - c->obj[1];
-  const double cy = cos(c->obj[2]), sy = sin(c->obj[2]);
-  const double lx = cy * dx + sy * dy, ly = -sy * dx + cy * dy;  /* in the box frame */
-  const double ex = fabs(lx) - h[0], ey = fabs(ly) - h[1];
+  const double d[2] = {c->ee[0] - c->obj[0], c->ee[1] - c->obj[1]};
+  double l[2];  /* in the box frame */
+  nd_rot2(cos(c->obj[2]), -sin(c->obj[2]), d, l);
+  const double ex = fabs(l[0]) - h[0], ey = fabs(l[1]) - h[1];
   double gap = hypot(ex > 0 ? ex : 0, ey > 0 ? ey : 0);
   if (ex <= 0 && ey <= 0) gap = ex > ey ? ex : ey;
   if (gap < ee_radius) {

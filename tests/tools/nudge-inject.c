@@ -573,6 +573,7 @@ static int parse_args(int argc, char **argv, inj_opts *o) {
       o->url = v;
     }
   }
+  if (o->place_id && !o->place_at) return bad_arg("--place-id needs --place-at");
   if (!any)
     for (int c = 0; c < CH_COUNT; c++) o->on[c] = c != CH_STATUS;
   return -1;

@@ -127,6 +127,14 @@ static void test_vec_helpers(void **state) {
   assert_near(nd_clamp(-2.0, -1.0, 1.0), -1.0, 0.0);
   assert_near(nd_clamp(0.5, -1.0, 1.0), 0.5, 0.0);
   assert_true(isnan(nd_clamp(NAN, -1.0, 1.0)));
+  /* A quarter turn takes x to y; the turn back, in place, restores it. */
+  double r[2];
+  nd_rot2(0.0, 1.0, v, r);
+  assert_near(r[0], 4.0, 0.0);
+  assert_near(r[1], 3.0, 0.0);
+  nd_rot2(0.0, -1.0, r, r);
+  assert_near(r[0], 3.0, 0.0);
+  assert_near(r[1], -4.0, 0.0);
   const double ok[3] = {0.0, -1e308, 5.0};
   double bad[3] = {0.0, 1.0, 2.0};
   assert_int_equal(nd_all_finite(ok, 3), 1);
