@@ -7,9 +7,26 @@
 #include <string.h>
 #include <sys/stat.h>
 
+/* Where each version puts what follows the common first 32 bytes (nd_history.h). */
+typedef struct {
+  uint32_t version;
+  int size, ntheta, mean, std, loss, fit_time, buffer_size, reserved;
+} nd_history_layout;
+
+static const nd_history_layout nd_history_v2 = {
+    2, ND_HISTORY_ENC_SIZE, ND_NTHETA, 32, 88, 144, 152, 160, 164};
+static const nd_history_layout nd_history_v1 = {
+    1, ND_HISTORY_ENC_SIZE_V1, ND_NTHETA_PAPER, 32, 64, 96, 104, 112, 116};
+
+/* Version 2 holds all of theta: a change of ND_NTHETA needs a new version. */
+_Static_assert(ND_NTHETA == 7 && ND_HISTORY_ENC_SIZE == 32 + 16 * ND_NTHETA + 24,
+               "the history encoding's layout does not match ND_NTHETA");
+_Static_assert(ND_HISTORY_ENC_VERSION == 2, "nd_history_encode writes nd_history_v2");
+
 int nd_history_check(const nd_history_entry *e, char *err, int errlen) {
-  if (e->mask < 1 || e->mask > 15) {
-    snprintf(err, errlen, "fit mask %u: must be in [1, 15]", (unsigned)e->mask);
+  const unsigned all = (1u << ND_NTHETA) - 1;
+  if (e->mask < 1 || e->mask > all) {
+    snprintf(err, errlen, "fit mask %u: must be in [1, %u]", (unsigned)e->mask, all);
     return -1;
   }
   if (e->version < 1) {
@@ -89,36 +106,42 @@ int nd_history_encode(const nd_history_entry *e, unsigned char buf[ND_HISTORY_EN
     snprintf(err, errlen, "history entry not encoded: %s", why);
     return -1;
   }
-  put_u32(buf + 0, ND_HISTORY_ENC_VERSION);
+  const nd_history_layout *l = &nd_history_v2;
+  put_u32(buf + 0, l->version);
   put_u32(buf + 4, e->mask);
   put_u64(buf + 8, (uint64_t)e->version);
   put_u64(buf + 16, (uint64_t)e->utime);
   put_u64(buf + 24, (uint64_t)e->buffer_created);
-  for (int i = 0; i < ND_NTHETA; i++) {
-    put_f64(buf + 32 + 8 * i, e->mean[i]);
-    put_f64(buf + 64 + 8 * i, e->std[i]);
+  for (int i = 0; i < l->ntheta; i++) {
+    put_f64(buf + l->mean + 8 * i, e->mean[i]);
+    put_f64(buf + l->std + 8 * i, e->std[i]);
   }
-  put_f64(buf + 96, e->loss);
-  put_f64(buf + 104, e->fit_time);
-  put_u32(buf + 112, (uint32_t)e->buffer_size);
-  put_u32(buf + 116, 0);
+  put_f64(buf + l->loss, e->loss);
+  put_f64(buf + l->fit_time, e->fit_time);
+  put_u32(buf + l->buffer_size, (uint32_t)e->buffer_size);
+  put_u32(buf + l->reserved, 0);
   return 0;
 }
 
 int nd_history_decode(nd_history_entry *e, const unsigned char *buf, size_t len, char *err,
                        int errlen) {
-  if (len != ND_HISTORY_ENC_SIZE) {
-    snprintf(err, errlen, "history entry of %zu bytes, expected %d", len,
-             ND_HISTORY_ENC_SIZE);
+  if (len != ND_HISTORY_ENC_SIZE && len != ND_HISTORY_ENC_SIZE_V1) {
+    snprintf(err, errlen, "history entry of %zu bytes, expected %d (version 2) or %d "
+             "(version 1)", len, ND_HISTORY_ENC_SIZE, ND_HISTORY_ENC_SIZE_V1);
     return -1;
   }
   const uint32_t ver = get_u32(buf);
-  if (ver != ND_HISTORY_ENC_VERSION) {
-    snprintf(err, errlen, "history entry encoding version %u, expected %d", (unsigned)ver,
-             ND_HISTORY_ENC_VERSION);
+  const nd_history_layout *l = ver == 2 ? &nd_history_v2 : ver == 1 ? &nd_history_v1 : NULL;
+  if (!l) {
+    snprintf(err, errlen, "history entry encoding version %u, expected 2 or 1", (unsigned)ver);
     return -1;
   }
-  const uint32_t reserved = get_u32(buf + 116);
+  if (len != (size_t)l->size) {
+    snprintf(err, errlen, "history entry encoding version %u in %zu bytes, expected %d",
+             (unsigned)ver, len, l->size);
+    return -1;
+  }
+  const uint32_t reserved = get_u32(buf + l->reserved);
   if (reserved != 0) {
     snprintf(err, errlen, "history entry reserved field is %08x, expected 0",
              (unsigned)reserved);
@@ -126,16 +149,22 @@ int nd_history_decode(nd_history_entry *e, const unsigned char *buf, size_t len,
   }
   memset(e, 0, sizeof(*e));
   e->mask = get_u32(buf + 4);
+  const unsigned mine = (1u << l->ntheta) - 1;
+  if (e->mask > mine) {  /* a version-1 entry fitted none of the box's */
+    snprintf(err, errlen, "history entry: fit mask %u: must be in [1, %u] in version %u",
+             (unsigned)e->mask, mine, (unsigned)ver);
+    return -1;
+  }
   e->version = (int64_t)get_u64(buf + 8);
   e->utime = (int64_t)get_u64(buf + 16);
   e->buffer_created = (int64_t)get_u64(buf + 24);
   for (int i = 0; i < ND_NTHETA; i++) {
-    e->mean[i] = get_f64(buf + 32 + 8 * i);
-    e->std[i] = get_f64(buf + 64 + 8 * i);
+    e->mean[i] = i < l->ntheta ? get_f64(buf + l->mean + 8 * i) : nd_theta_true[i];
+    e->std[i] = i < l->ntheta ? get_f64(buf + l->std + 8 * i) : 0.0;
   }
-  e->loss = get_f64(buf + 96);
-  e->fit_time = get_f64(buf + 104);
-  e->buffer_size = (int32_t)get_u32(buf + 112);
+  e->loss = get_f64(buf + l->loss);
+  e->fit_time = get_f64(buf + l->fit_time);
+  e->buffer_size = (int32_t)get_u32(buf + l->buffer_size);
   char why[200];
   if (nd_history_check(e, why, sizeof(why))) {
     snprintf(err, errlen, "history entry: %s", why);

@@ -26,7 +26,7 @@ static const char *default_arg(const nd_opt *o) {
     case ND_OPT_INT:
     case ND_OPT_U64: return "N";
     case ND_OPT_DOUBLE: return "X";
-    case ND_OPT_THETA: return "S,T,R,M";
+    case ND_OPT_THETA: return "S,T,R,M[,B,X,Y]";
     case ND_OPT_BOX: return "XLO,YLO,XHI,YHI";
     case ND_OPT_CHOICE: return "WORD";
     case ND_OPT_LIST: return "X,...";

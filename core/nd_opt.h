@@ -26,7 +26,7 @@ typedef enum {
   ND_OPT_STRING,   /* non-empty text: const char * (points into argv) */
   ND_OPT_LIST,     /* exactly n comma-separated numbers, each in [lo, hi]: double[n] */
   ND_OPT_CHOICE,   /* one word of choices (NULL-terminated): int, the word's index */
-  ND_OPT_THETA,    /* theta "S,T,R,M" (nd_theta_parse): double[ND_NTHETA] */
+  ND_OPT_THETA,    /* theta "S,T,R,M[,B,X,Y]" (nd_theta_parse): double[ND_NTHETA] */
   ND_OPT_BOX,      /* box "XLO,YLO,XHI,YHI" in metres, lo < hi: double[4] */
   ND_OPT_CUSTOM,   /* parse(value, "--name", dst, err, errlen), called for each use */
 } nd_opt_kind;

@@ -18,7 +18,7 @@ static const struct {
   int count;
 } nd_rollout_meta[] = {
     {"goal", offsetof(nd_rollout, goal), 3},
-    {"theta", offsetof(nd_rollout, theta), 4},
+    {"theta", offsetof(nd_rollout, theta), ND_NTHETA_PAPER},
     {"obj_pos", offsetof(nd_rollout, obj_pos), 3},
     {"obj_quat", offsetof(nd_rollout, obj_quat), 4},
     {"obj_vel", offsetof(nd_rollout, obj_vel), 6},

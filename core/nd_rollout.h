@@ -53,6 +53,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "nd_theta.h"
+
 /* What u holds. */
 enum { ND_CTRL_FORCE = 0, ND_CTRL_VELOCITY = 1 };
 
@@ -77,7 +79,8 @@ typedef struct {
   int64_t task_id;
   int64_t utime;          /* when the task started, microseconds since the epoch */
   double goal[3];         /* x, y, yaw */
-  double theta[4];        /* model parameters the planner used */
+  double theta[ND_NTHETA_PAPER]; /* the paper's four of the planner's theta (the box's
+                                   entries are in the adapter's history, not here) */
   int32_t outcome;        /* ND_OUTCOME_* */
   int32_t control;        /* ND_CTRL_* */
   double dt;              /* control step, s */

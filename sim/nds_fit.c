@@ -61,7 +61,6 @@
 /* Default prior width: the paper's smaller uncertainty, D = 0.2. */
 #define NDS_FIT_D_DEFAULT 0.2
 
-
 /* Candidate costs that differ by no more than this (m^2) are the same: a buffer that gives
  * every candidate the same L says nothing about the fitted parameters. Rollouts in which
  * the sphere never touched the box replay to an L of ~1e-30 for any friction, while a
@@ -78,9 +77,9 @@ void nds_fit_cfg_default(nds_fit_cfg *cfg) {
   cfg->lower = 1e-7;
   for (int i = 0; i < ND_NTHETA; i++) {
     double th = nd_theta_true[i], D = NDS_FIT_D_DEFAULT;
-    cfg->upper[i] = INFINITY;
+    cfg->upper[i] = nd_theta_signed(i) ? ND_THETA_COM_MAX : INFINITY;
     cfg->mu0[i] = th;
-    cfg->sigma0[i] = (th + D * th - fmax(cfg->lower, th - D * th)) / 16;
+    cfg->sigma0[i] = nds_fit_prior_std(th, D, cfg->lower, i);
   }
   cfg->std_floor = NDS_FIT_STD_FLOOR;
   cfg->k1 = NDS_FIT_K1;
@@ -97,17 +96,26 @@ void nds_fit_cfg_default(nds_fit_cfg *cfg) {
   cfg->seed = 1;
 }
 
+double nds_fit_prior_std(double r, double D, double lower, int i) {
+  if (nd_theta_signed(i)) return 2 * D * NDS_FIT_COM_SPAN / 16;
+  return (r + D * r - fmax(lower, r - D * r)) / 16;
+}
+
+double nds_fit_floor(const nds_fit_cfg *c, int i) {
+  return nd_theta_signed(i) ? -c->upper[i] : c->lower;
+}
+
 void nds_fit_paper_prior(const double theta[ND_NTHETA], double D, double lower, nd_rng *r,
                          double mu0[ND_NTHETA], double sigma0[ND_NTHETA]) {
   for (int i = 0; i < ND_NTHETA; i++) {
     double th = theta[i], lo = th - D * th, hi = th + D * th;
+    mu0[i] = th;
+    sigma0[i] = nds_fit_prior_std(th, D, lower, i);
+    if (i >= ND_NTHETA_PAPER) continue;
     double u = nd_rng_uniform(r);
     mu0[i] = fmax(lower, lo + u * (hi - lo));
-    sigma0[i] = (hi - fmax(lower, lo)) / 16;
   }
 }
-
-static const char *pname[ND_NTHETA] = {"slide", "torsion", "roll", "mass"};
 
 int nds_fit_cfg_check(const nds_fit_cfg *c, char *err, int errlen) {
   const char *bad = NULL;
@@ -138,11 +146,17 @@ int nds_fit_cfg_check(const nds_fit_cfg *c, char *err, int errlen) {
     if (c->scan[i] < 2 || c->scan[i] > NDS_FIT_MAX_SCAN || !c->fit[i])
       bad = "scan needs 2..16 points and a fitted parameter, or 0";
     else if (!(isfinite(c->scan_lo[i]) && isfinite(c->scan_hi[i]) &&
-               c->scan_lo[i] >= c->lower && c->scan_lo[i] < c->scan_hi[i]))
+               c->scan_lo[i] >= nds_fit_floor(c, i) && c->scan_lo[i] < c->scan_hi[i]))
       bad = "scan needs lower <= scan_lo < scan_hi, both finite";
   }
-  for (int i = 0; i < ND_NTHETA && !bad; i++)
-    if (c->fit[i] && !(c->upper[i] > c->lower)) bad = "upper must be > lower (INFINITY: none)";
+  for (int i = 0; i < ND_NTHETA && !bad; i++) {
+    if (c->fit[i] && !(c->upper[i] > nds_fit_floor(c, i)))
+      bad = "upper must be > lower (INFINITY: none)";
+    else if (c->logfit[i] == 1 && nd_theta_signed(i))
+      bad = "logfit needs a parameter that cannot be negative";
+    else if (nd_theta_signed(i) && !(c->upper[i] > 0 && c->upper[i] <= ND_THETA_COM_MAX))
+      bad = "a signed parameter's upper must be in (0, ND_THETA_COM_MAX]";
+  }
   if (bad) {
     snprintf(err, errlen, "fit: %s", bad);
     return -1;
@@ -150,18 +164,18 @@ int nds_fit_cfg_check(const nds_fit_cfg *c, char *err, int errlen) {
   int nfit = 0;
   for (int i = 0; i < ND_NTHETA; i++) {
     if (c->fit[i] != 0 && c->fit[i] != 1) {
-      snprintf(err, errlen, "fit: fit[%d] (%s) = %d, must be 0 or 1", i, pname[i], c->fit[i]);
+      snprintf(err, errlen, "fit: fit[%d] (%s) = %d, must be 0 or 1", i, nd_theta_key[i], c->fit[i]);
       return -1;
     }
     if (c->logfit[i] != 0 && c->logfit[i] != 1) {
-      snprintf(err, errlen, "fit: logfit[%d] (%s) = %d, must be 0 or 1", i, pname[i],
+      snprintf(err, errlen, "fit: logfit[%d] (%s) = %d, must be 0 or 1", i, nd_theta_key[i],
                c->logfit[i]);
       return -1;
     }
     nfit += c->fit[i];
     if (c->fit[i] && !(isfinite(c->mu0[i]) && isfinite(c->sigma0[i]) && c->sigma0[i] > 0)) {
       snprintf(err, errlen, "fit: %s prior mu0 = %g, sigma0 = %g: need finite, sigma0 > 0",
-               pname[i], c->mu0[i], c->sigma0[i]);
+               nd_theta_key[i], c->mu0[i], c->sigma0[i]);
       return -1;
     }
   }
@@ -179,7 +193,8 @@ int nds_fit_cfg_check(const nds_fit_cfg *c, char *err, int errlen) {
   }
   /* What the first candidate sees: fitted entries at their clipped prior mean. */
   double th[ND_NTHETA];
-  for (int i = 0; i < ND_NTHETA; i++) th[i] = c->fit[i] ? fmax(c->lower, c->mu0[i]) : c->mu0[i];
+  for (int i = 0; i < ND_NTHETA; i++)
+    th[i] = c->fit[i] ? fmax(nds_fit_floor(c, i), c->mu0[i]) : c->mu0[i];
   char terr[160];
   if (nd_theta_check(th, terr, sizeof(terr))) {
     snprintf(err, errlen, "fit: prior mean: %s", terr);
@@ -242,7 +257,7 @@ nds_fit *nds_fit_create(const nds_model *proto, const nds_fit_cfg *cfg, nd_pool 
     f->idx[f->nfit] = i;
     f->scale[f->nfit] = cfg->logfit[i] ? cfg->sigma0[i] / fmax(cfg->lower, cfg->mu0[i])
                                        : cfg->sigma0[i];
-    lower[f->nfit] = nds_fit_x(f, f->nfit, cfg->lower);
+    lower[f->nfit] = nds_fit_x(f, f->nfit, nds_fit_floor(cfg, i));
     upper[f->nfit] = isfinite(cfg->upper[i]) ? nds_fit_x(f, f->nfit, cfg->upper[i]) : INFINITY;
     f->nfit++;
   }
@@ -293,11 +308,11 @@ int nds_fit_set_dist(nds_fit *f, const double mean[ND_NTHETA], const double std[
   double th[ND_NTHETA], xm[ND_NTHETA], xs[ND_NTHETA];
   for (int i = 0; i < ND_NTHETA; i++) {
     if (f->cfg.fit[i] && !(isfinite(mean[i]) && isfinite(std[i]) && std[i] >= 0)) {
-      snprintf(err, errlen, "fit: %s mean = %g, std = %g: need finite, std >= 0", pname[i],
+      snprintf(err, errlen, "fit: %s mean = %g, std = %g: need finite, std >= 0", nd_theta_key[i],
                mean[i], std[i]);
       return -1;
     }
-    th[i] = f->cfg.fit[i] ? fmax(f->cfg.lower, mean[i]) : mean[i];
+    th[i] = f->cfg.fit[i] ? fmax(nds_fit_floor(&f->cfg, i), mean[i]) : mean[i];
   }
   char terr[160];
   if (nd_theta_check(th, terr, sizeof(terr))) {
@@ -334,7 +349,8 @@ double nds_fit_x(const nds_fit *f, int j, double th) {
 }
 
 double nds_fit_th(const nds_fit *f, int j, double x) {
-  return fmax(f->cfg.lower, is_log(f, j) ? exp(x * f->scale[j]) : x * f->scale[j]);
+  return fmax(nds_fit_floor(&f->cfg, f->idx[j]),
+              is_log(f, j) ? exp(x * f->scale[j]) : x * f->scale[j]);
 }
 
 double nds_fit_xstd(const nds_fit *f, int j, double th, double std) {
@@ -629,7 +645,7 @@ int nds_fit_run(nds_fit *f, const nd_rollout *rs, int n, nds_fit_out *out, char 
     double xs[ND_NTHETA];
     for (int j = 0; j < f->nfit; j++) {
       const double th = nds_fit_th(f, j, m0[j]);
-      xs[j] = fmax(s0[j], nds_fit_xstd(f, j, th, f->cfg.rel_floor * th));
+      xs[j] = fmax(s0[j], nds_fit_xstd(f, j, th, f->cfg.rel_floor * fabs(th)));
     }
     nd_cem_set_dist(f->cem, m0, xs);
   }

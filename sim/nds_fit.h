@@ -48,8 +48,12 @@ typedef struct {
   int logfit[ND_NTHETA];      /* 1: searched as ln theta with std sigma0 / mu0 (a parameter
                                   whose prior spans decades); its std in and out is then
                                   theta times the std of ln theta. 0: as theta */
-  double lower;                /* every fitted parameter stays >= lower > 0 (samples clipped) */
-  double upper[ND_NTHETA];     /* and <= upper[i] > lower (INFINITY: unbounded, the default) */
+  double lower;                /* every fitted parameter that cannot be negative stays >=
+                                  lower > 0 (samples clipped); a signed one (nd_theta_signed)
+                                  >= -upper[i] (nds_fit_floor) */
+  double upper[ND_NTHETA];     /* and <= upper[i] > its floor (INFINITY: unbounded, the
+                                  default; for a signed one finite, at most ND_THETA_COM_MAX,
+                                  the default) */
   double std_floor;            /* std never falls below std_floor * sigma0 (0: the paper's
                                   plain CEM, which freezes after a run or two) */
   double step_std;             /* nd_cem's step_std (the std follows the mean's steps; 0 off) */
@@ -87,6 +91,11 @@ typedef struct {
   uint64_t seed;
 } nds_fit_cfg;
 
+/* The centre-of-mass shift that sizes its prior as the paper's formula sizes the others
+ * with nominal r: the range +-D NDS_FIT_COM_SPAN, m. The paper's formula scales with r,
+ * and the nominal shift is 0; 2 cm is 40 % of the model box's half length. */
+#define NDS_FIT_COM_SPAN 0.02
+
 /* Paper settings: Q 32, C 2, rho 0.2, fitting the three frictions with the mass held;
  * prior at nd_theta_true with the paper's D = 0.2 std; lower 1e-7; k1 = 1,
  * k2 = 1e-3 m^2/rad; prune; seed 1. Beyond the paper (nds_fit.c; doc/decisions.md):
@@ -98,9 +107,17 @@ void nds_fit_cfg_default(nds_fit_cfg *cfg);
 /* Check cfg. Return 0, or -1 naming the bad field. */
 int nds_fit_cfg_check(const nds_fit_cfg *cfg, char *err, int errlen);
 
+/* Prior std of entry i for nominal value r and uncertainty D: the paper's (r + D r -
+ * max(lower, r - D r)) / 16, or 2 D NDS_FIT_COM_SPAN / 16 for a signed entry. */
+double nds_fit_prior_std(double r, double D, double lower, int i);
+
+/* The least value entry i may take in a fit: cfg->lower, or -cfg->upper[i] for a signed
+ * entry. */
+double nds_fit_floor(const nds_fit_cfg *cfg, int i);
+
 /* The paper's prior around theta for uncertainty D > 0: mu0 ~ U(theta - D theta,
- * theta + D theta) (clipped at lower), sigma0 = (theta + D theta - max(lower,
- * theta - D theta)) / 16, for all ND_NTHETA entries (four draws from r, in order). */
+ * theta + D theta) (clipped at lower), sigma0 = nds_fit_prior_std, for the paper's four
+ * entries (four draws from r, in order); the box's entries keep theta as their mean. */
 void nds_fit_paper_prior(const double theta[ND_NTHETA], double D, double lower, nd_rng *r,
                          double mu0[ND_NTHETA], double sigma0[ND_NTHETA]);
 

@@ -117,7 +117,7 @@ static int lm_solve(nds_fit *f, const nd_rollout *rs, int n, int iters,
   double x[ND_NTHETA], lo[ND_NTHETA], hi[ND_NTHETA], sc[ND_NTHETA];
   for (int j = 0; j < f->nfit; j++) {
     x[j] = nds_fit_x(f, j, theta[f->idx[j]]);
-    lo[j] = nds_fit_x(f, j, f->cfg.lower);
+    lo[j] = nds_fit_x(f, j, nds_fit_floor(&f->cfg, f->idx[j]));
     hi[j] = isfinite(f->cfg.upper[f->idx[j]]) ? nds_fit_x(f, j, f->cfg.upper[f->idx[j]]) : 1e6;
     sc[j] = 1.0;
   }

@@ -222,25 +222,28 @@ static int resolve(nds_model *nm, const char *what, char *err, int errlen) {
     snprintf(err, errlen, "%s: body \"ee\" must have only the joints ee_x and ee_y", what);
     return -1;
   }
-  /* nds_theta_apply relies on the sphere's dofs moving its mass alone. */
+  /* theta's sphere mass is the mass its two dofs move. */
   for (int b = 0; b < m->nbody; b++) {
     if (m->body_parentid[b] == nm->ee_body && b != nm->ee_body) {
       snprintf(err, errlen, "%s: body \"ee\" must have no child bodies", what);
       return -1;
     }
   }
-  if (m->dof_armature[nm->ee_dof[0]] != 0 || m->dof_armature[nm->ee_dof[1]] != 0) {
-    snprintf(err, errlen, "%s: joints ee_x, ee_y must have no armature", what);
-    return -1;
-  }
   nm->ee_height = m->body_pos[3 * nm->ee_body + 2];
-  const int b = nm->ee_body;
+  const int b = nm->ee_body, o = nm->obj_body;
   nm->ee_mass0 = m->body_mass[b];
-  for (int k = 0; k < 3; k++) nm->ee_inertia0[k] = m->body_inertia[3 * b + k];
-  for (int k = 0; k < 2; k++) {
-    nm->ee_body_invw0[k] = m->body_invweight0[2 * b + k];
-    nm->ee_dof_invw0[k] = m->dof_invweight0[nm->ee_dof[k]];
-    nm->ee_dof_M0[k] = m->dof_M0[nm->ee_dof[k]];
+  nm->obj_mass0 = m->body_mass[o];
+  for (int k = 0; k < 3; k++) {
+    nm->ee_inertia0[k] = m->body_inertia[3 * b + k];
+    nm->obj_inertia0[k] = m->body_inertia[3 * o + k];
+    nm->obj_ipos0[k] = m->body_ipos[3 * o + k];
+  }
+  nm->obj_sameframe0 = m->body_sameframe[o];
+  nm->obj_simple0 = m->body_simple[o];
+  nm->d0 = mj_makeData(m);
+  if (!nm->d0) {
+    snprintf(err, errlen, "%s: out of memory for the model's scratch data", what);
+    return -1;
   }
   return 0;
 }
@@ -323,8 +326,11 @@ int nds_model_load_file(nds_model *nm, const char *path, const nds_scene_cfg *cf
 
 int nds_model_copy(nds_model *dst, const nds_model *src, char *err, int errlen) {
   *dst = *src;
+  dst->d0 = NULL;
   dst->m = mj_copyModel(NULL, src->m);
-  if (!dst->m) {
+  if (dst->m) dst->d0 = mj_makeData(dst->m);
+  if (!dst->m || !dst->d0) {
+    nds_model_free(dst);
     snprintf(err, errlen, "model copy: out of memory");
     return -1;
   }
@@ -332,8 +338,34 @@ int nds_model_copy(nds_model *dst, const nds_model *src, char *err, int errlen) 
 }
 
 void nds_model_free(nds_model *nm) {
+  if (nm->d0) mj_deleteData(nm->d0);
   if (nm->m) mj_deleteModel(nm->m);
+  nm->d0 = NULL;
   nm->m = NULL;
+}
+
+/* MuJoCo's compiler marks a body whose inertial frame is its own frame (sameframe) and,
+ * if its joints allow, one whose dofs have a diagonal mass matrix (simple, and
+ * dof_simplenum, the simple dofs that follow each dof), and takes the fast path for them.
+ * A box with its centre of mass moved off the origin (shifted 1) has neither: the general
+ * path, which is exact for any body. Unshifted, the flags are as loaded, so the bits are
+ * those of the model as built. Geoms and sites placed at the inertial frame (sameframe 2)
+ * would move with it; they get the general path too. */
+static void set_frames(nds_model *nm, int shifted) {
+  mjModel *m = nm->m;
+  const int o = nm->obj_body, d0 = m->body_dofadr[o], nd = m->body_dofnum[o];
+  m->body_sameframe[o] = shifted ? 0 : nm->obj_sameframe0;
+  m->body_simple[o] = shifted ? 0 : nm->obj_simple0;
+  /* dof_simplenum counts down along a run of simple dofs; recount every run. */
+  for (int i = m->nv - 1; i >= 0; i--) {
+    const int b = m->dof_bodyid[i];
+    const int simple = m->body_simple[b] && !(shifted && i >= d0 && i < d0 + nd);
+    m->dof_simplenum[i] = simple ? 1 + (i + 1 < m->nv ? m->dof_simplenum[i + 1] : 0) : 0;
+  }
+  for (int g = 0; g < m->ngeom; g++)
+    if (shifted && m->geom_bodyid[g] == o && m->geom_sameframe[g] == 2) m->geom_sameframe[g] = 0;
+  for (int s = 0; s < m->nsite; s++)
+    if (shifted && m->site_bodyid[s] == o && m->site_sameframe[s] == 2) m->site_sameframe[s] = 0;
 }
 
 int nds_theta_apply(nds_model *nm, const double theta[ND_NTHETA], char *err, int errlen) {
@@ -348,26 +380,38 @@ int nds_theta_apply(nds_model *nm, const double theta[ND_NTHETA], char *err, int
     m->geom_friction[3 * g + 2] = theta[ND_TH_ROLL];
   }
 
-  /* Scaled from the values as loaded, not from the current ones: repeated applications
-   * would otherwise accumulate rounding and theta would not fix the model's bits. */
-  int b = nm->ee_body;
-  double s = theta[ND_TH_MASS] / nm->ee_mass0;
-  m->body_mass[b] = theta[ND_TH_MASS];
-  for (int k = 0; k < 3; k++) m->body_inertia[3 * b + k] = nm->ee_inertia0[k] * s;
-
-  /* What mj_setConst derives from the masses, updated without an mjData: the subtree
-   * masses (mj_comPos divides by them) and the inverse weights that scale contact
-   * softness. The sphere's two slide dofs carry only its own mass (resolve checks: a
-   * leaf body, no armature), so its inverse weights are exactly proportional to 1/mass. */
-  for (int i = 0; i < m->nbody; i++) m->body_subtreemass[i] = m->body_mass[i];
-  for (int i = m->nbody - 1; i > 0; i--)
-    m->body_subtreemass[m->body_parentid[i]] += m->body_subtreemass[i];
+  /* The box's centre of mass must stay inside it, which a model's box may be smaller
+   * than ND_THETA_COM_MAX allows. */
+  const int o = nm->obj_body, b = nm->ee_body;
+  const double shift[2] = {theta[ND_TH_COM_X], theta[ND_TH_COM_Y]};
   for (int k = 0; k < 2; k++) {
-    m->body_invweight0[2 * b + k] = nm->ee_body_invw0[k] / s;
-    m->dof_invweight0[nm->ee_dof[k]] = nm->ee_dof_invw0[k] / s;
-    m->dof_M0[nm->ee_dof[k]] = nm->ee_dof_M0[k] * s;
+    const double c = nm->obj_ipos0[k] + shift[k];
+    if (fabs(c) > nm->cfg.obj_half[k]) {
+      snprintf(err, errlen, "theta[%d] (%s) = %g puts the centre of mass at %g m, outside "
+               "the box (half side %g m)", ND_TH_COM_X + k, nd_theta_name[ND_TH_COM_X + k],
+               shift[k], c, nm->cfg.obj_half[k]);
+      return -1;
+    }
   }
 
+  /* Scaled from the values as loaded, not from the current ones: repeated applications
+   * would otherwise accumulate rounding and theta would not fix the model's bits. An
+   * offset centre of mass keeps the inertia about it (a box with a denser part). */
+  const double s = theta[ND_TH_MASS] / nm->ee_mass0, f = theta[ND_TH_BOX_SCALE];
+  m->body_mass[b] = theta[ND_TH_MASS];
+  m->body_mass[o] = nm->obj_mass0 * f;
+  for (int k = 0; k < 3; k++) {
+    m->body_inertia[3 * b + k] = nm->ee_inertia0[k] * s;
+    m->body_inertia[3 * o + k] = nm->obj_inertia0[k] * f;
+    m->body_ipos[3 * o + k] = nm->obj_ipos0[k] + (k < 2 ? shift[k] : 0.0);
+  }
+
+  set_frames(nm, shift[0] != 0 || shift[1] != 0);
+
+  /* What MuJoCo's compiler derives from the masses (subtree masses, the inverse weights
+   * that scale contact softness, the mass matrix at qpos0), derived the same way: a model
+   * given theta equals one built with it. */
+  mj_setConst(m, nm->d0);
   memcpy(nm->cfg.theta, theta, sizeof(nm->cfg.theta));
   return 0;
 }

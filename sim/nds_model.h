@@ -51,9 +51,14 @@ typedef struct {
   int obj_qpos, obj_dof;  /* free joint: qpos 7 (pos, w-first quat), dof 6 */
   int ee_qpos[2], ee_dof[2];
   double ee_height;       /* z of the sphere centre */
-  /* The sphere's mass-dependent model values as loaded: nds_theta_apply sets them from
+  /* The mass-dependent values theta scales, as loaded: nds_theta_apply sets them from
    * these, so applying a theta gives the same bits whatever was applied before. */
-  double ee_mass0, ee_inertia0[3], ee_body_invw0[2], ee_dof_invw0[2], ee_dof_M0[2];
+  double ee_mass0, ee_inertia0[3];
+  double obj_mass0, obj_inertia0[3], obj_ipos0[3];
+  /* MuJoCo's shortcuts for a box whose centre of mass is its frame's origin, as loaded;
+   * a shifted centre of mass turns them off (nds_theta_apply). */
+  mjtByte obj_sameframe0, obj_simple0;
+  mjData *d0;             /* scratch for mj_setConst, owned */
 } nds_model;
 
 /* The planning model's scene at step dt: the defaults, except at 10 ms (the live

@@ -42,8 +42,8 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
       {"history", ND_OPT_STRING, &history, .arg = "FILE", .def = "<buffer>.history",
        .help = "parameter history"},
       {"fit", ND_OPT_CUSTOM, &o->fit, .parse = parse_fit, .arg = "LIST", .def = "slide,torsion,roll",
-       .help = "fitted parameters, comma-separated from slide, torsion, roll, mass; the others "
-               "are held at --theta"},
+       .help = "fitted parameters, comma-separated from slide, torsion, roll, mass, box_scale, "
+               "com_x, com_y; the others are held at --theta"},
       {"log-fit", ND_OPT_CUSTOM, &o->logfit, .parse = parse_list, .arg = "LIST", .def = "none",
        .help = "fitted parameters searched as ln theta, with the paper's prior std taken of "
                "ln theta, ln((r + D r) / max(1e-7, r - D r)) / 16: for a prior that spans "
@@ -59,11 +59,14 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
       {"scan-points", ND_OPT_INT, &o->scan_points, 2, NDS_FIT_MAX_SCAN, .arg = "K",
        .help = "points of --scan per parameter, each one replay of the buffer"},
       {"theta", ND_OPT_THETA, o->theta, .def = "the simulation's ground truth",
-       .help = "prior mean: sliding, torsional, rolling friction, sphere mass in kg (give the "
-               "planner's --theta to start the loop from a wrong model)"},
+       .help = "prior mean: sliding, torsional, rolling friction, sphere mass in kg, and "
+               "optionally the box's mass scale and centre-of-mass shift x, y in m from the "
+               "model's (default 1, 0, 0; give the planner's --theta to start the loop from a "
+               "wrong model)"},
       {"prior-d", ND_OPT_DOUBLE, &o->D, 0.01, 10.0, .arg = "D",
        .help = "prior std per parameter (r + D r - max(1e-7, r - D r)) / 16, the paper's "
-               "formula, with r the nominal theta of --prior-ref"},
+               "formula, with r the nominal theta of --prior-ref; for a centre-of-mass shift "
+               "2 D s / 16 with s = 0.02 m"},
       {"prior-ref", ND_OPT_THETA, o->ref, .def = "the simulation's ground truth",
        .help = "nominal theta that sizes the prior std; not --theta: a wrong mean must not "
                "also shrink the std (0.3 instead of 1 would give the truth a 19-std distance "
@@ -134,20 +137,22 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
     return nd_opt_fail(&spec, "--replay-phases %d needs --replay-window above 0 and neither "
                        "--robust nor --lm-iters", fc->phases);
   for (int i = 0; i < ND_NTHETA; i++) {
-    /* The paper's width vanishes for a nominal value of 0. */
-    if ((o->fit >> i & 1) && !(o->ref[i] > 0.0))
+    /* The paper's width vanishes for a nominal value of 0 (a shift's is not the paper's). */
+    if ((o->fit >> i & 1) && !nd_theta_signed(i) && !(o->ref[i] > 0.0))
       return nd_opt_fail(&spec, "--prior-ref: %s is fitted, so its nominal value must be > 0",
                          nd_theta_key[i]);
     /* The paper sizes the std from the true theta and draws the mean around it; here the
      * mean is given (--theta) and the nominal theta stands in for the truth. */
     const double r = o->ref[i], D = o->D;
+    /* A shift's range is +-D NDS_FIT_COM_SPAN about its nominal value, within the bounds. */
+    const double w = nd_theta_signed(i) ? D * NDS_FIT_COM_SPAN : D * r;
     fc->fit[i] = o->fit >> i & 1;
     fc->mu0[i] = o->theta[i];
-    fc->sigma0[i] = (r + D * r - fmax(fc->lower, r - D * r)) / 16;
+    fc->sigma0[i] = nds_fit_prior_std(r, D, fc->lower, i);
     if ((o->scan >> i & 1) && fc->fit[i]) {
       fc->scan[i] = o->scan_points;
-      fc->scan_lo[i] = fmax(fc->lower, r - D * r);
-      fc->scan_hi[i] = r + D * r;
+      fc->scan_lo[i] = fmax(nds_fit_floor(fc, i), r - w);
+      fc->scan_hi[i] = fmin(fc->upper[i], r + w);
     }
     if ((o->logfit >> i & 1) && fc->fit[i]) {
       /* nds_fit takes a log parameter's std as theta times the std of ln theta. */

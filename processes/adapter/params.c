@@ -67,14 +67,14 @@ void adapter_collect(adapter *a, adapter_fitter *ft) {
   a->covered = n;
   a->failed_n = 0;
   a->st.state = "idle";
-  printf("refit version %lld: %d rollout(s) in %.2f s, loss %.4g%s%s%s, theta %.6g %.6g %.6g "
-         "%.6g, std %.3g %.3g %.3g %.3g\n",
+  char mean[200], std[200];
+  nd_theta_str(e.mean, " ", mean, sizeof(mean));
+  nd_theta_str(e.std, " ", std, sizeof(std));
+  printf("refit version %lld: %d rollout(s) in %.2f s, loss %.4g%s%s%s, theta %s, std %s\n",
          (long long)e.version, n, secs, e.loss,
          out.diverged_mean ? " (mean diverged on some)" : "",
          out.flat ? " (flat: the rollouts do not tell the candidates apart; theta kept)" : "",
-         out.scan_moved ? " (moved by the scan)" : "",
-         e.mean[0], e.mean[1], e.mean[2],
-         e.mean[3], e.std[0], e.std[1], e.std[2], e.std[3]);
+         out.scan_moved ? " (moved by the scan)" : "", mean, std);
   fflush(stdout);
   if (adapter_publish(a))
     fprintf(stderr, PROG ": publishing on %s failed\n", NDP_CH_PARAMS);
@@ -139,19 +139,22 @@ void adapter_banner(const adapter *a, const nds_fit *fit, const nds_fit_cfg *fc,
   const adapter_opts *o = a->o;
   double m0[ND_NTHETA], s0[ND_NTHETA];
   nds_fit_dist(fit, m0, s0);
-  char fitted[64], rank[64] = "L", scanned[64] = "none";
+  char fitted[80], rank[64] = "L", scanned[80] = "none", ref[200], mean[200], std[200];
+  nd_theta_str(o->ref, ", ", ref, sizeof(ref));
+  nd_theta_str(m0, ", ", mean, sizeof(mean));
+  nd_theta_str(s0, ", ", std, sizeof(std));
   nd_theta_mask_str(o->fit, fitted, sizeof(fitted));
   if (o->scan & o->fit) nd_theta_mask_str(o->scan & o->fit, scanned, sizeof(scanned));
   if (fc->robust > 0) snprintf(rank, sizeof(rank), "the robust score of scale %g m^2", fc->robust);
   fprintf(stderr,
           PROG ": buffer %s, history %s (%lld entries%s), fit %s, CEM Q %d C %d rho %.2g, "
-          "prior D %g on (%g, %g, %g, %g), %s (%.4g, %.4g, %.4g, %.4g) std (%.3g, %.3g, %.3g, "
-          "%.3g), replay %s dt %g s window %g s x %d phase(s), scan %s (%d points), ranked by %s, "
+          "prior D %g on (%s), %s (%s) std (%s), replay %s dt %g s window %g s x %d phase(s), "
+          "scan %s (%d points), ranked by %s, "
           "LM %d iterations, %d worker(s), nice %d, %s\n",
           o->buffer, o->history, (long long)hs->entries, hs->have_last ? ", resuming" : "",
-          fitted, fc->pop, fc->iters, fc->elite_frac, o->D, o->ref[0], o->ref[1], o->ref[2],
-          o->ref[3], hs->have_last ? "from version" : "prior", m0[0], m0[1], m0[2], m0[3],
-          s0[0], s0[1], s0[2], s0[3], nds_replay_mode_name(fc->replay.mode), o->replay_dt,
+          fitted, fc->pop, fc->iters, fc->elite_frac, o->D, ref,
+          hs->have_last ? "from version" : "prior", mean, std,
+          nds_replay_mode_name(fc->replay.mode), o->replay_dt,
           fc->replay.window, fc->phases, scanned, o->scan_points, rank, fc->lm_iters, o->threads,
           o->nice, ndp_url(o->url));
   if (hs->have_last)

@@ -60,11 +60,13 @@ int main(int argc, char **argv) {
     goto done;
   const nd_mocap_cfg *mc = &wc.mocap;
   const nds_scene_cfg *ob = &wc.object;
+  char theta[200];
+  nd_theta_str(wc.theta, ", ", theta, sizeof(theta));
   fprintf(stderr,
           PROG ": emulation, %s world (%s), dt %.3g ms at %g Hz real time (%s); MOCAP %g Hz, "
                "noise %g m %g rad, latency %g +- %g s, %g%% lost in bursts of %g; object %g x "
-               "%g x %g m, %g kg, centre of mass (%g, %g, %g), solref %g %g; theta (%g, %g, "
-               "%g, %g); start object (%g, %g, %g), ee (%g, %g); EE_CMD timeout %g s, "
+               "%g x %g m, %g kg, centre of mass (%g, %g, %g), solref %g %g; theta (%s); "
+               "start object (%g, %g, %g), ee (%g, %g); EE_CMD timeout %g s, "
                "workspace x [%g, %g] y [%g, %g] m (+%g m); model %s; LCM %s\n",
           wc.kind == NDS_WORLD_LAB ? "lab" : "ideal",
           wc.arm ? "a Panda holds the sphere" : "the sphere on slide joints", 1e3 / rc.rate,
@@ -72,7 +74,7 @@ int main(int argc, char **argv) {
           mc->latency_jitter, 100 * mc->drop_prob * mc->drop_burst, mc->drop_burst,
           2 * ob->obj_half[0], 2 * ob->obj_half[1], 2 * ob->obj_half[2], ob->obj_mass,
           ob->obj_com[0], ob->obj_com[1], ob->obj_com[2], ob->solref[0], ob->solref[1],
-          wc.theta[0], wc.theta[1], wc.theta[2], wc.theta[3], wc.obj[0], wc.obj[1], wc.obj[2],
+          theta, wc.obj[0], wc.obj[1], wc.obj[2],
           wc.ee[0], wc.ee[1], cmd_timeout, ws.lo[0], ws.hi[0], ws.lo[1], ws.hi[1],
           BRIDGE_WS_MARGIN, wc.model_path ? wc.model_path : "built-in scene", ndp_url(url));
 

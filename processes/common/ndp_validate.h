@@ -21,6 +21,9 @@
 
 _Static_assert(ND_MAX_KEYS == NUDGE_PLAN_T_MAX_KEYPOINTS,
                "plan_t carries as many keypoints as the planner and executor handle");
+_Static_assert(sizeof(((nudge_params_t *)0)->theta_mean) == ND_NTHETA * sizeof(double) &&
+                   sizeof(((nudge_params_t *)0)->theta_std) == ND_NTHETA * sizeof(double),
+               "params_t carries all of theta");
 
 /* Bounds shared by the checks: the workspace is a few metres at most, nothing a pushing
  * robot does exceeds these by orders of magnitude. */

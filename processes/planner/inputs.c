@@ -140,8 +140,9 @@ static void use_params(void *user, const nudge_params_t *m) {
     return;
   }
   p->theta_version = m->version;
-  fprintf(stderr, PROG ": theta version %lld: (%g, %g, %g, %g)\n", (long long)m->version,
-          m->theta_mean[0], m->theta_mean[1], m->theta_mean[2], m->theta_mean[3]);
+  char th[200];
+  nd_theta_str(m->theta_mean, ", ", th, sizeof(th));
+  fprintf(stderr, PROG ": theta version %lld: (%s)\n", (long long)m->version, th);
 }
 
 NDP_INPUT(nudge_mocap_t, ndp_check_mocap, on_mocap_raw, use_mocap, refuse)

@@ -153,13 +153,15 @@ int main(int argc, char **argv) {
   p.obj_half[1] = pm.cfg.obj_half[1];
   p.ee_radius = pm.cfg.ee_radius;
 
+  char theta[200];
+  nd_theta_str(o.theta, ", ", theta, sizeof(theta));
   fprintf(stderr,
           PROG ": %s, iCEM N %d C %d, M %d, T %.2f s, plan dt %.4f s (%s contact), %d worker(s), max %.1f "
-          "plans/s, lead %s, arrival %g, proximity %s, arm %s (load <= %g), redraws %d, state timeout %.3f s, theta (%g, %g, %g, %g), seed %llu, keypoints in "
+          "plans/s, lead %s, arrival %g, proximity %s, arm %s (load <= %g), redraws %d, state timeout %.3f s, theta (%s), seed %llu, keypoints in "
           "x [%g, %g] y [%g, %g] m, v_max %g m/s, a_max %g m/s^2\n",
           ndp_url(o.url), o.pop, o.iters, pc.M, pc.T, o.plan_dt,
           calibrated ? "calibrated" : "the world's", o.threads, o.max_rate,
-          lead_words[o.lead], pc.arrival, prox_words[pc.prox_round], arm_words[arm], pc.reach_max, pc.redraws, o.state_timeout, o.theta[0], o.theta[1], o.theta[2], o.theta[3],
+          lead_words[o.lead], pc.arrival, prox_words[pc.prox_round], arm_words[arm], pc.reach_max, pc.redraws, o.state_timeout, theta,
           (unsigned long long)o.seed, pc.ws_lo[0], pc.ws_hi[0], pc.ws_lo[1], pc.ws_hi[1],
           pc.v_max, pc.a_max);
 

@@ -61,6 +61,10 @@ static void left_block(const view_inputs *in, int64_t now_us, text *k, text *v) 
     const double *th = in->params.theta_mean;
     put(v, "\nv%lld: slide %.3g  torsion %.3g  roll %.3g  mass %.3g kg",
         (long long)in->params.version, th[0], th[1], th[2], th[3]);
+    /* The box's entries only when a fit moved them from the model's box. */
+    if (th[ND_TH_BOX_SCALE] != 1 || th[ND_TH_COM_X] != 0 || th[ND_TH_COM_Y] != 0)
+      put(v, "  box x%.3g, COM %+.1f %+.1f mm", th[ND_TH_BOX_SCALE], 1e3 * th[ND_TH_COM_X],
+          1e3 * th[ND_TH_COM_Y]);
   } else {
     put(v, "\nno PARAMS yet");
   }

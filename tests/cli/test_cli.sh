@@ -122,10 +122,21 @@ list_cases() { # PROG OPT GOOD OUT_OF_RANGE_FIRST: a comma list like GOOD
   bad "$prog" "$opt|expected $n comma-separated numbers|${good//,/;}" "$opt" "${good//,/;}"
   bad "$prog" "$opt needs a value" "$opt"
 }
-theta_cases() { # PROG OPT: S,T,R,M; beyond the list checks: a zero or negative mass
-  list_cases "$1" "$2" 1,0.005,0.0001,1 -0.1
-  bad "$1" "$2|sphere mass|= 0" "$2" 1,0.005,0.0001,0
-  bad "$1" "$2|-2 is out of range" "$2" 1,0.005,0.0001,-2
+theta_cases() { # PROG OPT: S,T,R,M or S,T,R,M,B,X,Y, each entry by its own rule
+  local prog=$1 opt=$2 rest=0.005,0.0001,1
+  bad "$prog" "$opt|'nan' is not a finite number" "$opt" "nan,$rest"
+  bad "$prog" "$opt|'inf' is not a finite number" "$opt" "inf,$rest"
+  bad "$prog" "$opt|'x' is not a finite number" "$opt" "x,$rest"
+  bad "$prog" "$opt|100000 is out of range" "$opt" "1e5,$rest"
+  bad "$prog" "$opt|sliding friction|= -0.1" "$opt" "-0.1,$rest"
+  bad "$prog" "$opt|expected 4 values|or 7" "$opt" 1,0.005,0.0001
+  bad "$prog" "$opt|expected 4 values|or 7" "$opt" "1,$rest,1"
+  bad "$prog" "$opt|expected 4 values|or 7" "$opt" "1;0.005;0.0001;1"
+  bad "$prog" "$opt needs a value" "$opt"
+  bad "$prog" "$opt|sphere mass|= 0" "$opt" 1,0.005,0.0001,0
+  bad "$prog" "$opt|sphere mass|= -2" "$opt" 1,0.005,0.0001,-2
+  bad "$prog" "$opt|box mass scale|= 0" "$opt" "1,$rest,0,0,0"
+  bad "$prog" "$opt|box COM shift x|= 0.2" "$opt" "1,$rest,1,0.2,0"
 }
 common_cases() { # PROG: what every program refuses
   local prog=$1
@@ -306,6 +317,7 @@ bad nudge-up "--theta|'nan,1,1,1'" --theta nan,1,1,1
 bad nudge-up "--theta|'1,2,3'" --theta 1,2,3
 bad nudge-up "--theta|'1,2,3,4;touch x'" --theta '1,2,3,4;touch x'
 bad nudge-up "--theta|'1,2,3,4 5'" --theta '1,2,3,4 5'
+bad nudge-up "--theta|'1,2,3,4,5'|4 or 7" --theta 1,2,3,4,5
 bad nudge-up "--workspace|'1,2,3'|XLO,YLO,XHI,YHI" --workspace 1,2,3
 bad nudge-up "--workspace|'1,2,3,4;touch x'" --workspace '1,2,3,4;touch x'
 bad nudge-up "--workspace needs a value" --workspace

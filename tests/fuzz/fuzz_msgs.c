@@ -90,10 +90,13 @@ static void fz_valid_place(const nudge_place_t *m) {
 
 static void fz_valid_params(const nudge_params_t *m) {
   FZ_CHECK(m->utime > 0 && m->version >= 0 && m->buffer_size >= 0, "accepted params header");
-  for (int i = 0; i < 4; i++)
-    FZ_CHECK(isfinite(m->theta_mean[i]) && m->theta_mean[i] >= 0 &&
-             m->theta_mean[i] <= 1e4 && (i != 3 || m->theta_mean[i] > 0) &&
-             isfinite(m->theta_std[i]) && m->theta_std[i] >= 0, "accepted theta[%d]", i);
+  for (int i = 0; i < 7; i++) {
+    const double v = m->theta_mean[i];
+    const int shift = i == 5 || i == 6, positive = i == 3 || i == 4;
+    FZ_CHECK(isfinite(v) && (shift ? fabs(v) <= 0.05 : v >= 0 && v <= 1e4) &&
+             (!positive || v > 0) && isfinite(m->theta_std[i]) && m->theta_std[i] >= 0,
+             "accepted theta[%d]", i);
+  }
 }
 
 /* Bytes the processes' handler refused: it must say why. */
@@ -208,6 +211,17 @@ static void fz_history(const uint8_t *d, size_t len) {
   FZ_CHECK(nd_history_check(&e, why, sizeof why) == 0, "history: decoded invalid: %s", why);
   uint8_t out[ND_HISTORY_ENC_SIZE];
   FZ_CHECK(nd_history_encode(&e, out, why, sizeof why) == 0, "history: %s", why);
+  if (len == ND_HISTORY_ENC_SIZE_V1) {
+    /* Version 1 comes back as version 2: its fields unchanged, the box as built, held. */
+    FZ_CHECK(d[0] == 1 && out[0] == 2 && memcmp(out + 4, d + 4, 60) == 0 &&
+             memcmp(out + 88, d + 64, 32) == 0 && memcmp(out + 144, d + 96, 24) == 0,
+             "history: version 1 re-encodes differently");
+    const double zero = 0.0;
+    for (int i = ND_NTHETA_PAPER; i < ND_NTHETA; i++)
+      FZ_CHECK(!memcmp(&e.mean[i], &nd_theta_true[i], 8) && !memcmp(&e.std[i], &zero, 8),
+               "history: version 1 decoded theta[%d] other than as built and held", i);
+    return;
+  }
   FZ_CHECK(len == sizeof out && memcmp(out, d, len) == 0, "history: re-encodes differently");
 }
 

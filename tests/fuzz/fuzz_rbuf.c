@@ -1,5 +1,5 @@
 /* Fuzz target: the replay buffer on disk (core/nd_rfile.h, nd_rbuf.h, nd_rollout.h) and
- * the parameter history that shares its framing (processes/nd_history.h).
+ * the parameter history that shares its framing (core/nd_history.h).
  *
  * The input is the whole content of a record file. It is written to a scratch file and
  * read through every reader (raw records, rollouts one by one, all rollouts at once, the
@@ -7,8 +7,9 @@
  * damage followed by valid records without touching the file, and then accept one more
  * record. A reference model written from nd_rfile.h's format text predicts each outcome:
  * which records are valid, where and why reading stops, what the writer keeps. Every
- * decoded rollout or history entry must re-encode to the very bytes it came from. The raw
- * input is also fed to nd_rollout_decode directly.
+ * decoded rollout or history entry must re-encode to the very bytes it came from (a
+ * version-1 history entry: to version 2 with the same fields). The raw input is also fed
+ * to nd_rollout_decode directly.
  *
  * Random bytes never carry a valid crc32, so the fuzzer alone would almost never get past
  * the frame checks to the decoders. Each input therefore runs a second time with the
@@ -219,6 +220,17 @@ static int fz_history(const uint8_t *d, size_t len) {
   if (nd_history_decode(&e, d, len, why, sizeof why)) return 0;
   uint8_t out[ND_HISTORY_ENC_SIZE];
   FZ_CHECK(nd_history_encode(&e, out, why, sizeof why) == 0, "%s", why);
+  if (len == ND_HISTORY_ENC_SIZE_V1) {
+    /* Version 1 comes back as version 2: its fields unchanged, the box as built, held. */
+    FZ_CHECK(d[0] == 1 && out[0] == 2 && memcmp(out + 4, d + 4, 60) == 0 &&
+             memcmp(out + 88, d + 64, 32) == 0 && memcmp(out + 144, d + 96, 24) == 0,
+             "version-1 history entry re-encodes differently");
+    const double zero = 0.0;
+    for (int i = ND_NTHETA_PAPER; i < ND_NTHETA; i++)
+      FZ_CHECK(!memcmp(&e.mean[i], &nd_theta_true[i], 8) && !memcmp(&e.std[i], &zero, 8),
+               "version-1 history entry: theta[%d] other than as built and held", i);
+    return 1;
+  }
   FZ_CHECK(len == sizeof out && memcmp(out, d, len) == 0, "history entry re-encodes "
            "differently");
   return 1;

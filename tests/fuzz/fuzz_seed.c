@@ -3,7 +3,7 @@
  *   fuzz-seed DIR   (DIR is usually tests/fuzz/corpus)
  * Seeds are small valid inputs the fuzzer mutates from: a replay buffer with two short
  * rollouts (whole and with a torn tail), a parameter history, a raw rollout encoding, one
- * message of each LCM type, a history entry, and goal files. */
+ * message of each LCM type, a history entry in each encoding version, and goal files. */
 #define _GNU_SOURCE
 #include <errno.h>
 #include <math.h>
@@ -101,20 +101,38 @@ static void seed_rbuf(void) {
   }
   nd_rfile_writer_close(&w);
 
-  /* A parameter history of two refits. */
+  /* A parameter history of three refits: begun in version 1 (the paper's four fitted, the
+   * box as built), continued in version 2 with the box fitted too. */
   path_of(p, sizeof p, "fuzz_rbuf", "history.buf");
   unlink(p);
   if (nd_rfile_open_append(&w, p, ND_RFILE_KIND_PARAMS, NULL, err, sizeof err)) die(err);
-  for (int v = 1; v <= 2; v++) {
+  for (int v = 1; v <= 3; v++) {
     nd_history_entry e = {.version = v, .utime = 1795496794000000 + v,
                            .buffer_created = 1795496793000000, .mask = 7,
-                           .mean = {0.8, 0.004, 1e-4, 0.1}, .std = {0.05, 1e-3, 2e-5, 0},
+                           .mean = {0.8, 0.004, 1e-4, 0.1, 1.0, 0.0, 0.0},
+                           .std = {0.05, 1e-3, 2e-5, 0},
                            .loss = 0.01 / v, .fit_time = 2.5, .buffer_size = v};
-    unsigned char b[ND_HISTORY_ENC_SIZE];
-    if (nd_history_encode(&e, b, err, sizeof err) ||
-        nd_rfile_append(&w, ND_RFILE_KIND_PARAMS, b, sizeof b, err, sizeof err))
-      die(err);
-    if (v == 1) put("fuzz_msgs", "history_entry.bin", b, sizeof b);
+    if (v > 1) {
+      const double box[3] = {1.1, 0.008, -0.004}, box_std[3] = {0.05, 1.5e-3, 2.5e-3};
+      e.mask = 0x77;  /* all but the sphere mass */
+      memcpy(e.mean + ND_TH_BOX_SCALE, box, sizeof box);
+      memcpy(e.std + ND_TH_BOX_SCALE, box_std, sizeof box_std);
+    }
+    unsigned char b[ND_HISTORY_ENC_SIZE], b1[ND_HISTORY_ENC_SIZE_V1];
+    if (nd_history_encode(&e, b, err, sizeof err)) die(err);
+    const void *rec = b;
+    size_t n = sizeof b;
+    if (v == 1) {  /* version 2's bytes without theta[4..6] (nd_history.h) */
+      memcpy(b1, b, 64);
+      b1[0] = 1;
+      memcpy(b1 + 64, b + 88, 32);
+      memcpy(b1 + 96, b + 144, 24);
+      rec = b1;
+      n = sizeof b1;
+      put("fuzz_msgs", "history_entry_v1.bin", b1, sizeof b1);
+    }
+    if (v == 2) put("fuzz_msgs", "history_entry.bin", b, sizeof b);
+    if (nd_rfile_append(&w, ND_RFILE_KIND_PARAMS, rec, n, err, sizeof err)) die(err);
   }
   nd_rfile_writer_close(&w);
 
@@ -172,8 +190,8 @@ static void seed_msgs(void) {
   nudge_task_t tk = {.utime = t, .task_id = 1, .goal_x = 0.1, .goal_y = 0.05,
                      .goal_yaw = 0.3, .eps = 0.01, .time_limit = 5, .v_max = 0.3};
   SEED_MSG(task_t, tk);
-  nudge_params_t pa = {.utime = t, .version = 2, .theta_mean = {0.8, 0.004, 1e-4, 0.1},
-                       .theta_std = {0.05, 1e-3, 2e-5, 0}, .fit_mask = 7, .loss = 0.01,
+  nudge_params_t pa = {.utime = t, .version = 2, .theta_mean = {0.8, 0.004, 1e-4, 0.1, 1.1, 0.008, -0.004},
+                       .theta_std = {0.05, 1e-3, 2e-5, 0, 0.1, 0.002, 0.002}, .fit_mask = 0x77, .loss = 0.01,
                        .buffer_size = 2};
   SEED_MSG(params_t, pa);
   nudge_episode_t ep = {.utime = t, .task_id = 1, .event = 1, .reason = "goal reached",

@@ -6,7 +6,9 @@
 # 1. Bad arguments are refused with status 2 and a message naming the input, before
 #    anything starts; a results directory that holds a study is refused (status 1).
 # 2. One run of two episodes from sliding and torsional friction half the truth's: every episode's row
-#    is there with the fit it evaluated (versions 0, 1, 2 on 0, 1, 2 rollouts), the
+#    is there, theta's seven entries and their stds in their columns (the four given
+#    completed with the box's neutral 1, 0, 0, which the fit, not fitting them, keeps),
+#    with the fit it evaluated (versions 0, 1, 2 on 0, 1, 2 rollouts), the
 #    buffers hold the two training pushes and the five held-out evaluation tasks (less any
 #    met at the start or that left the object still: nothing recorded), a training push
 #    left unrecorded is drawn again and said so, the validation loss was scored for each
@@ -42,6 +44,9 @@ refused 2 "--world" --out "$PT_WORK/x" --world moon
 refused 2 "--runs" --out "$PT_WORK/x" --runs 0
 refused 2 "--episodes" --out "$PT_WORK/x" --episodes 1
 refused 2 "--theta" --out "$PT_WORK/x" --theta 1,2,3
+refused 2 "--theta" --out "$PT_WORK/x" --theta 1,0.005,0.0001,1,1,0
+# Seven entries pass (the box's shifts may be negative): the next check refuses instead.
+refused 2 "--await-fit" --out "$PT_WORK/x" --theta 1,0.005,0.0001,1,1.1,-0.004,1e-05 --await-fit x
 refused 2 "--replay-mode" --out "$PT_WORK/x" --replay-mode setpoint
 refused 2 "eps" --out "$PT_WORK/x" --eps 7
 refused 2 "--train-v-max" --out "$PT_WORK/x" --train-v-max -1
@@ -56,14 +61,34 @@ rc=$?
 cat "$PT_WORK/study.out"
 pt_check "nudge-study exits 0 (got $rc)" test "$rc" -eq 0
 CSV=$OUT/run_0.csv
-col() { awk -F, -v e="$1" -v c="$2" 'NR > 1 && $1 == e { print $c }' "$CSV"; }
-pt_check "run_0.csv: a header and 3 rows of 20 columns" \
-  awk -F, 'NF != 20 { bad = 1 } END { exit bad || NR != 4 }' "$CSV"
+# col EPISODE NAME: the value in column NAME (the header's) of episode EPISODE's row.
+col() {
+  awk -F, -v e="$1" -v n="$2" 'NR == 1 { for (i = 1; i <= NF; i++) { if ($i == "episode") ce = i; if ($i == n) c = i }; next }
+    ce && c && $ce == e { print $c }' "$CSV"
+}
+KEYS="slide torsion roll mass box_scale com_x com_y"
+HDR=episode,version,rollouts,${KEYS// /,},${KEYS// /_std,}_std,fit_loss,val_loss,train_reached,train_time,eval_success,eval_time,eval_obj_path,eval_ee_path,reflex_stops
+pt_check "run_0.csv: the header of theta's 7 entries and their stds, and 3 rows of its 26 columns" \
+  awk -F, -v h="$HDR" 'NR == 1 && $0 != h { bad = 1 } NF != 26 { bad = 1 } END { exit bad || NR != 4 }' "$CSV"
 pt_check "versions 0, 1, 2 fitted on 0, 1, 2 rollouts" \
-  test "$(col 0 2)$(col 1 2)$(col 2 2)/$(col 0 3)$(col 1 3)$(col 2 3)" = "012/012"
+  test "$(col 0 version)$(col 1 version)$(col 2 version)/$(col 0 rollouts)$(col 1 rollouts)$(col 2 rollouts)" = "012/012"
 pt_check "every row has a positive validation loss" \
-  awk -F, 'NR > 1 && !($13 > 0) { bad = 1 } END { exit bad }' "$CSV"
-s0=$(col 0 4) s2=$(col 2 4)
+  awk -v v="$(col 0 val_loss) $(col 1 val_loss) $(col 2 val_loss)" \
+    'BEGIN { n = split(v, a, " "); for (i = 1; i <= n; i++) if (!(a[i] > 0)) bad = 1; exit bad || n != 3 }'
+num='^[+-]?([0-9]+([.][0-9]*)?|[.][0-9]+)([eE][+-]?[0-9]+)?$'
+bad_cells=""
+for e in 0 1 2; do
+  for k in $KEYS; do
+    for n in "$k" "${k}_std"; do [[ $(col $e "$n") =~ $num ]] || bad_cells+=" $e:$n='$(col $e "$n")'"; done
+  done
+done
+pt_check "every row has 7 means and 7 stds, all numbers${bad_cells:+ (not:$bad_cells)}" test -z "$bad_cells"
+box=""
+for e in 0 1 2; do box+=" $(col $e box_scale),$(col $e com_x),$(col $e com_y)"; done
+pt_check "the box's entries, given as four and not fitted, are 1, 0, 0 in every row (got$box)" \
+  awk -v b="$box" 'BEGIN { n = split(b, r, " "); for (i = 1; i <= n; i++) {
+    split(r[i], v, ","); if (!(v[1] == 1 && v[2] == 0 && v[3] == 0)) bad = 1 }; exit bad || n != 3 }'
+s0=$(col 0 slide) s2=$(col 2 slide)
 pt_figure study_sliding_ep2 "$s2" ratio
 pt_check "the run started at sliding friction 0.5 (got $s0)" test "$s0" = 0.5
 pt_check "sliding error at episode 2 below 25 % (got $s2)" \

@@ -390,8 +390,8 @@ static void inject_place(inj *j) {
 }
 
 static void inject_params(inj *j) {
-  const nudge_params_t ok = {wall_us(), 1000000, {1, 0.005, 1e-4, 1}, {0, 0, 0, 0},
-                             15, 0.0, 1};
+  const nudge_params_t ok = {wall_us(), 1000000, {1, 0.005, 1e-4, 1, 1, 0, 0},
+                             {0, 0, 0, 0, 0, 0, 0}, 15, 0.0, 1};
   nudge_params_t m;
 #define PAR_BAD(stmt)                                                   \
   do {                                                                  \
@@ -407,6 +407,8 @@ static void inject_params(inj *j) {
   PAR_BAD(m.theta_mean[0] = 1e9);
   PAR_BAD(m.theta_std[0] = INFINITY);
   PAR_BAD(m.theta_std[3] = -1.0);
+  PAR_BAD(m.theta_mean[4] = 0.0);  /* box_scale */
+  PAR_BAD(m.theta_mean[5] = 0.2);  /* com_x */
   PAR_BAD(m.version = -1);
   PAR_BAD(m.buffer_size = -1);
   PAR_BAD(m.utime = 0);

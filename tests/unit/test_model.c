@@ -126,7 +126,7 @@ static void test_bad_theta_rejected(void **state) {
   assert_memory_equal(fr, nm.m->geom_friction, sizeof(fr));
   assert_near(nm.m->body_mass[nm.ee_body], mass, 0);
   /* Zero friction is a valid (if slippery) world. */
-  double ok[ND_NTHETA] = {0, 0, 0, 0.2};
+  double ok[ND_NTHETA] = {0, 0, 0, 0.2, 1, 0, 0};
   char err[256];
   assert_int_equal(nd_theta_check(ok, err, sizeof(err)), 0);
   nds_model_free(&nm);
@@ -145,16 +145,18 @@ static void test_theta_parse(void **state) {
   struct {
     const char *s, *what;
   } bad[] = {
-      {"-0.1,0.005,1e-4,1", "-0.1 is out of range"},           /* negative */
+      {"-0.1,0.005,1e-4,1", "theta[0] (sliding friction) = -0.1"},  /* negative */
+      {"1,0.005,1e-4,1,1,0.06,0", "theta[5] (box COM shift x) = 0.06"},  /* outside */
+      {"1,0.005,1e-4,1,-1,0,0", "theta[4] (box mass scale) = -1"},
       {"1,0.005,1e-4,0", "theta[3] (sphere mass) = 0"},        /* zero mass */
       {"1,0.005,1e-4,-0", "theta[3] (sphere mass) = -0"},      /* signed zero */
       {"nan,0.005,1e-4,1", "'nan' is not a finite number"},    /* NaN */
       {"1,inf,1e-4,1", "'inf' is not a finite number"},        /* infinite */
       {"1,0.005,1e-4,1e5", "100000 is out of range"},          /* absurd */
-      {"1,0.005,1e-4", "expected 4 comma-separated numbers"},  /* too few */
-      {"1,0.005,1e-4,1,1", "expected 4 comma-separated numbers"},  /* too many */
-      {"1;0.005;1e-4;1", "expected 4 comma-separated numbers"},
-      {"", "expected 4 comma-separated numbers"},
+      {"1,0.005,1e-4", "expected 4 values"},  /* too few */
+      {"1,0.005,1e-4,1,1", "expected 4 values"},  /* too many */
+      {"1;0.005;1e-4;1", "expected 4 values"},
+      {"", "expected 4 values"},
   };
   for (size_t i = 0; i < sizeof(bad) / sizeof(bad[0]); i++) {
     err[0] = 0;
@@ -169,7 +171,7 @@ static void test_theta_parse(void **state) {
  * mass, inertia and every quantity MuJoCo derives from mass at compile time. */
 static void test_theta_apply_matches_build(void **state) {
   (void)state;
-  const double th[ND_NTHETA] = {0.7, 0.01, 0.001, 0.3};
+  const double th[ND_NTHETA] = {0.7, 0.01, 0.001, 0.3, 1, 0, 0};
   nds_scene_cfg cfg;
   nds_scene_cfg_default(&cfg);
   nds_model a, b;
@@ -198,6 +200,50 @@ static void test_theta_apply_matches_build(void **state) {
   nds_model_free(&b);
 }
 
+/* The box's entries of theta give the model built with that box: 10 % heavier with its
+ * centre of mass 8 mm forward and 4 mm to the right (the lab's box) equals a 0.55 kg box
+ * built so, down to what MuJoCo derives from it. A shift out of the box is refused. */
+static void test_theta_box_matches_build(void **state) {
+  (void)state;
+  const double th[ND_NTHETA] = {0.7, 0.01, 0.001, 0.3, 1.1, 0.008, -0.004};
+  nds_scene_cfg cfg;
+  nds_scene_cfg_default(&cfg);
+  nds_model a, b;
+  build(&a, &cfg);
+  memcpy(cfg.theta, th, sizeof(th));
+  cfg.theta[ND_TH_BOX_SCALE] = 1, cfg.theta[ND_TH_COM_X] = 0, cfg.theta[ND_TH_COM_Y] = 0;
+  cfg.obj_mass = 0.55, cfg.obj_com[0] = 0.008, cfg.obj_com[1] = -0.004;
+  build(&b, &cfg);
+  char err[256];
+  assert_int_equal(nds_theta_apply(&a, th, err, sizeof(err)), 0);
+  const mjModel *ma = a.m, *mb = b.m;
+  const int o = a.obj_body;
+  assert_near(ma->body_mass[o], 0.55, 1e-15);
+  for (int k = 0; k < 3; k++) assert_near(ma->body_ipos[3 * o + k], mb->body_ipos[3 * o + k], 0);
+  for (int i = 0; i < ma->nbody; i++) {
+    assert_near(ma->body_mass[i], mb->body_mass[i], 1e-15);
+    assert_near(ma->body_subtreemass[i], mb->body_subtreemass[i], 1e-15);
+    for (int k = 0; k < 3; k++)
+      assert_near(ma->body_inertia[3 * i + k], mb->body_inertia[3 * i + k], 1e-15);
+    for (int k = 0; k < 2; k++)
+      assert_near(ma->body_invweight0[2 * i + k], mb->body_invweight0[2 * i + k],
+                  1e-12 * fabs(mb->body_invweight0[2 * i + k]));
+  }
+  for (int i = 0; i < ma->nv; i++) {
+    assert_near(ma->dof_invweight0[i], mb->dof_invweight0[i], 1e-12 * mb->dof_invweight0[i]);
+    assert_near(ma->dof_M0[i], mb->dof_M0[i], 1e-12 * mb->dof_M0[i]);
+  }
+  /* The default box is 6 cm deep: a 3.1 cm shift across it leaves it. */
+  double out[ND_NTHETA];
+  memcpy(out, th, sizeof(out));
+  out[ND_TH_COM_Y] = -0.031;
+  assert_int_equal(nds_theta_apply(&a, out, err, sizeof(err)), -1);
+  assert_non_null(strstr(err, "theta[6] (box COM shift y) = -0.031 puts the centre of mass"));
+  assert_near(ma->body_ipos[3 * o + 1], -0.004, 0);  /* refused: the model kept theta */
+  nds_model_free(&a);
+  nds_model_free(&b);
+}
+
 /* theta fixes the model's bits: applying other values first and then theta gives exactly
  * what applying theta once gives (parameter fits rely on it: a worker's model holds
  * whatever the previous candidate left). */
@@ -209,10 +255,12 @@ static void test_theta_apply_idempotent(void **state) {
   build(&a, &cfg);
   build(&b, &cfg);
   char err[256];
-  const double th[ND_NTHETA] = {0.9, 0.004, 0.0002, 1.37};
+  const double th[ND_NTHETA] = {0.9, 0.004, 0.0002, 1.37, 1.07, 0.003, -0.002};
   assert_int_equal(nds_theta_apply(&a, th, err, sizeof(err)), 0);
   for (int i = 0; i < 100; i++) {
-    const double other[ND_NTHETA] = {0.3 + 0.01 * i, 0.001 * i, 1e-5 * i, 0.2 + 0.037 * i};
+    const double other[ND_NTHETA] = {0.3 + 0.01 * i, 0.001 * i,        1e-5 * i,
+                                     0.2 + 0.037 * i, 0.5 + 0.01 * i, 1e-4 * i - 0.005,
+                                     0.01 - 2e-4 * i};
     assert_int_equal(nds_theta_apply(&b, other, err, sizeof(err)), 0);
     assert_int_equal(nds_theta_apply(&b, th, err, sizeof(err)), 0);
   }
@@ -223,6 +271,7 @@ static void test_theta_apply_idempotent(void **state) {
   assert_memory_equal(ma->body_invweight0, mb->body_invweight0, sizeof(mjtNum) * 2 * ma->nbody);
   assert_memory_equal(ma->dof_invweight0, mb->dof_invweight0, sizeof(mjtNum) * ma->nv);
   assert_memory_equal(ma->dof_M0, mb->dof_M0, sizeof(mjtNum) * ma->nv);
+  assert_memory_equal(ma->body_ipos, mb->body_ipos, sizeof(mjtNum) * 3 * ma->nbody);
   assert_memory_equal(ma->geom_friction, mb->geom_friction, sizeof(mjtNum) * 3 * ma->ngeom);
   nds_model_free(&a);
   nds_model_free(&b);
@@ -235,7 +284,7 @@ static void test_copy_is_independent(void **state) {
   char err[256];
   assert_int_equal(nds_model_copy(&b, &a, err, sizeof(err)), 0);
   assert_ptr_not_equal(a.m, b.m);
-  double th[ND_NTHETA] = {0.3, 0.001, 0.0, 2.0};
+  double th[ND_NTHETA] = {0.3, 0.001, 0.0, 2.0, 1, 0, 0};
   assert_int_equal(nds_theta_apply(&b, th, err, sizeof(err)), 0);
   assert_near(a.m->geom_friction[0], 1.0, 0);
   assert_near(a.m->body_mass[a.ee_body], 1.0, 0);
@@ -256,7 +305,7 @@ static void test_mass_changes_response(void **state) {
   double travel[2];
   const double masses[2] = {0.5, 2.0};
   for (int j = 0; j < 2; j++) {
-    double th[ND_NTHETA] = {1, 0.005, 1e-4, masses[j]};
+    double th[ND_NTHETA] = {1, 0.005, 1e-4, masses[j], 1, 0, 0};
     char err[256];
     assert_int_equal(nds_theta_apply(&nm, th, err, sizeof(err)), 0);
     nds_state s;
@@ -602,6 +651,7 @@ int main(void) {
       cmocka_unit_test(test_bad_theta_rejected),
       cmocka_unit_test(test_theta_parse),
       cmocka_unit_test(test_theta_apply_matches_build),
+      cmocka_unit_test(test_theta_box_matches_build),
       cmocka_unit_test(test_theta_apply_idempotent),
       cmocka_unit_test(test_copy_is_independent),
       cmocka_unit_test(test_mass_changes_response),

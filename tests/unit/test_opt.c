@@ -188,7 +188,7 @@ static void test_usage_and_table(void **state) {
   }
   assert_non_null(strstr(out, "--x S"));
   assert_non_null(strstr(out, "a count (1..10, default 7)"));
-  assert_non_null(strstr(out, "(default 1,0.005,0.0001,1)"));
+  assert_non_null(strstr(out, "(default 1,0.005,0.0001,1,1,0,0)"));
   assert_non_null(strstr(out, "(default setpoint)"));
   assert_non_null(strstr(out, "-h, --help"));
   assert_non_null(strstr(out, "\nEpilog line.\n"));

@@ -57,19 +57,43 @@ static void test_list(void **state) {
   }
 }
 
-/* Theta has one validity rule: every entry finite and <= 1e4, frictions >= 0, mass > 0. */
+/* Theta has one validity rule: every entry finite; frictions in [0, 1e4]; masses and the
+ * box's scale in (0, 1e4]; the centre-of-mass shifts within +-5 cm. */
 static void test_theta(void **state) {
   (void)state;
   char err[256];
   double th[ND_NTHETA] = {0};
   assert_int_equal(nd_theta_parse("0.3,0,1e-4,50", "--theta", th, err, sizeof(err)), 0);
   assert_near(th[ND_TH_MASS], 50, 0);
-  const double good[ND_NTHETA] = {1, 0.005, 1e-4, 1};
+  const double good[ND_NTHETA] = {1, 0.005, 1e-4, 1, 1, 0, 0};
   assert_int_equal(nd_theta_check(good, err, sizeof(err)), 0);
-  const double bad[4][ND_NTHETA] = {
-      {-1e-9, 0.005, 1e-4, 1}, {1, NAN, 1e-4, 1}, {1, 0.005, 2e4, 1}, {1, 0.005, 1e-4, 0}};
-  for (int k = 0; k < 4; k++) assert_int_equal(nd_theta_check(bad[k], err, sizeof(err)), -1);
+  const double bad[7][ND_NTHETA] = {
+      {-1e-9, 0.005, 1e-4, 1, 1, 0, 0}, {1, NAN, 1e-4, 1, 1, 0, 0},
+      {1, 0.005, 2e4, 1, 1, 0, 0},      {1, 0.005, 1e-4, 1, 0, 0, 0},
+      {1, 0.005, 1e-4, 1, 1, 0.051, 0}, {1, 0.005, 1e-4, 1, 1, 0, -INFINITY},
+      {1, 0.005, 1e-4, 0, 1, 0, 0}};
+  for (int k = 0; k < 7; k++) assert_int_equal(nd_theta_check(bad[k], err, sizeof(err)), -1);
   assert_non_null(strstr(err, "theta[3] (sphere mass) = 0"));
+  assert_int_equal(nd_theta_check(bad[4], err, sizeof(err)), -1);
+  assert_non_null(strstr(err, "theta[5] (box COM shift x) = 0.051"));
+  /* A shift may be negative; four values leave the box as built. */
+  double th7[ND_NTHETA];
+  assert_int_equal(nd_theta_parse("1,0.005,1e-4,1,1.1,0.008,-0.004", "--theta", th7, err,
+                                  sizeof(err)), 0);
+  assert_near(th7[ND_TH_BOX_SCALE], 1.1, 0);
+  assert_near(th7[ND_TH_COM_Y], -0.004, 0);
+  assert_int_equal(nd_theta_parse("1,0.005,1e-4,2", "--theta", th7, err, sizeof(err)), 0);
+  assert_near(th7[ND_TH_MASS], 2, 0);
+  assert_near(th7[ND_TH_BOX_SCALE], 1, 0);
+  assert_near(th7[ND_TH_COM_X], 0, 0);
+  assert_near(th7[ND_TH_COM_Y], 0, 0);
+  assert_int_equal(nd_theta_parse("1,0.005,1e-4,2,1", "--theta", th7, err, sizeof(err)), -1);
+  assert_non_null(strstr(err, "--theta: '1,0.005,1e-4,2,1': expected 4 values"));
+  assert_int_equal(nd_theta_parse("-1,0.005,1e-4,2", "--theta", th7, err, sizeof(err)), -1);
+  assert_non_null(strstr(err, "--theta: theta[0] (sliding friction) = -1"));
+  char str[200];
+  nd_theta_str(nd_theta_true, ",", str, sizeof(str));
+  assert_string_equal(str, "1,0.005,0.0001,1,1,0,0");
   assert_int_equal(nd_theta_parse("1,0.005,1e-4,0", "--theta", th, err, sizeof(err)), -1);
   assert_non_null(strstr(err, "--theta: theta[3]"));
   assert_near(th[ND_TH_MASS], 50, 0);  /* a refused value leaves theta as it was */

@@ -57,7 +57,7 @@ static void test_record_replays_exactly(void **state) {
   nds_record rec;
   assert_int_equal(nds_record_init(&rec, 1.5, 0.001, err, sizeof(err)), 0);
   assert_true(rec.cap >= 1501 && rec.cap <= 1502);  /* k dt <= tau: k = 0..1500, + rounding */
-  const double theta[ND_NTHETA] = {0.8, 0.004, 2e-4, 1.0};
+  const double theta[ND_NTHETA] = {0.8, 0.004, 2e-4, 1.0, 1, 0, 0};
   assert_int_equal(nds_record_begin(&rec, &f->x.world, &f->start, 42, 1700000000000000LL, &g,
                                     theta, err, sizeof(err)), 0);
   nds_episode_out o;
@@ -71,7 +71,7 @@ static void test_record_replays_exactly(void **state) {
   assert_int_equal(r->n, (int)lround(o.t_end / 0.001));
   assert_int_equal(r->task_id, 42);
   assert_true(r->goal[0] == g.x && r->goal[1] == g.y && r->goal[2] == g.yaw);
-  assert_memory_equal(r->theta, theta, sizeof(theta));
+  assert_memory_equal(r->theta, theta, sizeof(r->theta));  /* the paper's four */
   assert_int_equal(r->control, ND_CTRL_FORCE);
   assert_int_equal(r->outcome, o.reached ? ND_OUTCOME_SUCCESS : ND_OUTCOME_TIMEOUT);
   assert_true(r->dt == 0.001);
@@ -102,7 +102,7 @@ static void test_record_replays_exactly(void **state) {
       assert_memory_equal(pred + 5 * k + 3, r->ee + 2 * k, 2 * sizeof(double));
     }
   }
-  const double other[ND_NTHETA] = {0.7, 0.005, 1e-4, 1.0};
+  const double other[ND_NTHETA] = {0.7, 0.005, 1e-4, 1.0, 1, 0, 0};
   assert_int_equal(nds_theta_apply(&nm, other, err, sizeof(err)), 0);
   for (int i = 0; i < 2; i++) {
     nds_replay_cfg rc;
@@ -136,7 +136,7 @@ static void test_record_bounds(void **state) {
   fixture *f = *state;
   char err[256];
   const nd_goal g = {.x = 0.20, .y = 0.0, .yaw = 0.0};
-  const double theta[ND_NTHETA] = {1, 0.005, 1e-4, 1};
+  const double theta[ND_NTHETA] = {1, 0.005, 1e-4, 1, 1, 0, 0};
   nds_record rec;
   assert_int_equal(nds_record_init(&rec, 0.1, 0.001, err, sizeof(err)), 0);
   assert_int_equal(nds_record_finish(&rec, ND_OUTCOME_SUCCESS, err, sizeof(err)), -1);

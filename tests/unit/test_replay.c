@@ -165,7 +165,7 @@ static void test_replay_exact(void **state) {
     }
   }
   /* A dirty mjData: a replay under another theta ran on it first. */
-  const double other[ND_NTHETA] = {0.5, 0.02, 1e-3, 2.0};
+  const double other[ND_NTHETA] = {0.5, 0.02, 1e-3, 2.0, 1, 0, 0};
   nds_model nb;
   nds_test_build(&nb, 0.001, other);
   nds_replay_terms t;
@@ -183,7 +183,7 @@ static void test_replay_exact(void **state) {
  * L jumps from exactly 0 to ~0.6 (m^2: tens of cm of mean error). */
 static void test_replay_wrong_theta(void **state) {
   (void)state;
-  const double thB[ND_NTHETA] = {0.5, 0.005, 1e-4, 1.0};
+  const double thB[ND_NTHETA] = {0.5, 0.005, 1e-4, 1.0, 1, 0, 0};
   nds_model nb;
   nds_test_build(&nb, 0.001, thB);
   mjData *d = mj_makeData(nb.m);
@@ -193,7 +193,7 @@ static void test_replay_wrong_theta(void **state) {
     assert_true(L > 0.3);
   }
   /* Closer thetas give smaller losses: the loss sees the direction of the error. */
-  const double thC[ND_NTHETA] = {0.9, 0.005, 1e-4, 1.0};
+  const double thC[ND_NTHETA] = {0.9, 0.005, 1e-4, 1.0, 1, 0, 0};
   nds_model nc;
   nds_test_build(&nc, 0.001, thC);
   double Lb = buffer_loss(&nb, d, push, NPUSH), Lc = buffer_loss(&nc, d, push, NPUSH);
@@ -211,7 +211,7 @@ static void test_replay_wrong_theta(void **state) {
 static void test_replay_robust(void **state) {
   (void)state;
   const double k1 = 1, k2 = 1e-3, scale = 1e-9;
-  const double th[ND_NTHETA] = {1.02, 0.005, 1e-4, 1.0};
+  const double th[ND_NTHETA] = {1.02, 0.005, 1e-4, 1.0, 1, 0, 0};
   nds_model nm, nb;
   nds_test_build(&nm, 0.001, NULL);
   nds_test_build(&nb, 0.001, th);
@@ -315,7 +315,7 @@ static void test_replay_ratio(void **state) {
   (void)state;
   nds_model m2, m2b;
   nds_test_build(&m2, 0.002, NULL);
-  const double thB[ND_NTHETA] = {0.5, 0.005, 1e-4, 1.0};
+  const double thB[ND_NTHETA] = {0.5, 0.005, 1e-4, 1.0, 1, 0, 0};
   nds_test_build(&m2b, 0.002, thB);
   mjData *d = mj_makeData(m2.m);
   nds_replay_cfg rc;
@@ -438,7 +438,7 @@ static void test_replay_velocity(void **state) {
   assert_near(pred[5 * (n - 1) + 3], x, 1e-12);
   assert_near(pred[5 * (n - 1) + 4], ee[1], 0);
 
-  const double heavy[ND_NTHETA] = {1, 0.005, 1e-4, 2.0};
+  const double heavy[ND_NTHETA] = {1, 0.005, 1e-4, 2.0, 1, 0, 0};
   assert_int_equal(nds_theta_apply(&nm, heavy, err, sizeof(err)), 0);
   assert_int_equal(nds_replay(&nm, d, &rc, &r, &t2, NULL, err, sizeof(err)), 0);
   printf("velocity_replay_pos_ee mass1 %.3e mass2 %.3e m^2\n", t1.pos_ee, t2.pos_ee);
@@ -553,7 +553,7 @@ static void test_replay_frames_join(void **state) {
         rec_copy(&r, &push[i]);
         mocap_frames(&push[i], &g, noisy, join, &r);
         for (int j = 0; j < NT; j++) {
-          const double th[ND_NTHETA] = {1, tor[j], 1e-4, 1};
+          const double th[ND_NTHETA] = {1, tor[j], 1e-4, 1, 1, 0, 0};
           assert_int_equal(nds_theta_apply(&nm, th, err, sizeof(err)), 0);
           nds_replay_terms t;
           assert_int_equal(nds_replay(&nm, d, &rc, &r, &t, NULL, err, sizeof(err)), 0);
@@ -707,7 +707,7 @@ static void test_torsion_landscape(void **state) {
   const double tor[7] = {1e-7, 0.0025, 0.004, 0.005, 0.006, 0.01, 0.05};
   double Lturn[7];
   for (int j = 0; j < 7; j++) {
-    const double th[ND_NTHETA] = {1, tor[j], 1e-4, 1};
+    const double th[ND_NTHETA] = {1, tor[j], 1e-4, 1, 1, 0, 0};
     assert_int_equal(nds_theta_apply(&nm, th, err, sizeof(err)), 0);
     double L0 = buffer_loss(&nm, d, &push[0], 1);
     double L1 = buffer_loss(&nm, d, &push[1], 1), L2 = buffer_loss(&nm, d, &push[2], 1);
@@ -1159,7 +1159,7 @@ static void obj_errors(const nd_rollout *r, const double *pred, double *e) {
  * and the other way round. A phase outside [0, window) is refused by name. */
 static void test_replay_phase(void **state) {
   (void)state;
-  const double th[ND_NTHETA] = {0.9, 0.005, 1e-4, 1.0};
+  const double th[ND_NTHETA] = {0.9, 0.005, 1e-4, 1.0, 1, 0, 0};
   nds_model nm;
   nds_test_build(&nm, 0.001, th);
   mjData *d = mj_makeData(nm.m);
@@ -1204,7 +1204,7 @@ static void test_replay_phase(void **state) {
  * mean: nds_fit_loss equals the replays' own mean, and a run completes on it. */
 static void test_fit_phases(void **state) {
   (void)state;
-  const double th[ND_NTHETA] = {0.9, 0.004, 1e-4, 1.0};
+  const double th[ND_NTHETA] = {0.9, 0.004, 1e-4, 1.0, 1, 0, 0};
   char err[256];
   nds_model nm;
   nds_test_build(&nm, 0.001, NULL);

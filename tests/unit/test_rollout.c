@@ -105,7 +105,7 @@ static void test_tracks_keypoints(void **state) {
 /* The lightest supported sphere at the coarsest supported step still tracks. */
 static void test_light_sphere_coarse_step(void **state) {
   (void)state;
-  const double th[ND_NTHETA] = {1, 0.005, 1e-4, 0.2};
+  const double th[ND_NTHETA] = {1, 0.005, 1e-4, 0.2, 1, 0, 0};
   nds_model nm;
   nds_ctrl_cfg ctrl;
   mjData *d = open_model(&nm, 0.01, th, &ctrl);
@@ -131,7 +131,7 @@ static void behind_start(const nds_model *nm, nds_state *s, double sp[2][4]) {
 /* Theta reaches the contact: the sphere strikes the box and stops, the box slides on;
  * it slides less far under more sliding friction. */
 static double push_distance(double slide) {
-  const double th[ND_NTHETA] = {slide, 0.005, 1e-4, 1.0};
+  const double th[ND_NTHETA] = {slide, 0.005, 1e-4, 1.0, 1, 0, 0};
   nds_model nm;
   nds_ctrl_cfg ctrl;
   mjData *d = open_model(&nm, 0.001, th, &ctrl);
@@ -276,11 +276,11 @@ static void test_deterministic(void **state) {
   assert_true(bo[1].obj_xy[1] != bo[2].obj_xy[1]);
 
   /* theta for the whole batch, checked before any model changes. */
-  const double bad[ND_NTHETA] = {1, 0.005, 1e-4, NAN};
+  const double bad[ND_NTHETA] = {1, 0.005, 1e-4, NAN, 1, 0, 0};
   assert_int_equal(nds_batch_set_theta(b, bad, err, sizeof(err)), -1);
   assert_non_null(strstr(err, "sphere mass"));
   assert_near(nds_batch_model(b, 1)->m->body_mass[proto.ee_body], 1.0, 0);
-  const double th[ND_NTHETA] = {0.6, 0.005, 1e-4, 0.7};
+  const double th[ND_NTHETA] = {0.6, 0.005, 1e-4, 0.7, 1, 0, 0};
   assert_int_equal(nds_batch_set_theta(b, th, err, sizeof(err)), 0);
   for (int w = 0; w < 2; w++) {
     assert_near(nds_batch_model(b, w)->m->body_mass[proto.ee_body], 0.7, 0);

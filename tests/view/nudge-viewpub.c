@@ -257,7 +257,8 @@ int main(int argc, char **argv) {
       }
     } else if (!strcmp(w, "params")) {
       if (nums(a, "params", 4, v, &n)) return 2;
-      nudge_params_t m = {p.t, ++p.version, {v[0], v[1], v[2], v[3]}, {0, 0, 0, 0}, 7, 0.0, 1};
+      nudge_params_t m = {p.t, ++p.version, {v[0], v[1], v[2], v[3], 1, 0, 0},
+                          {0, 0, 0, 0, 0, 0, 0}, 7, 0.0, 1};
       send(&p, "PARAMS", nudge_params_t_encode(p.buf, 0, MAX_MSG, &m));
     } else if (!strcmp(w, "status")) {
       char name[64] = "", *state = NULL;
