@@ -823,6 +823,72 @@ static void test_fit_recovers_sliding(void **state) {
   nd_pool_free(pool);
 }
 
+/* The box's centre of mass, fitted from the pushes of a box whose centre of mass sits
+ * 8 mm forward and 4 mm to the right (the lab's), velocity-replayed as the lab's records
+ * are: from the model's centre (0, 0) with the default prior (D 1: std 2.5 mm), the
+ * frictions held at the truth, two runs of Q 16, C 2 end within 1.5 mm of it, a shift
+ * either way. A negative shift is fitted as any other; the bounds stay the model box's. */
+static void test_fit_com(void **state) {
+  (void)state;
+  char err[256];
+  nd_pool *pool = nd_pool_create(2, err, sizeof(err));
+  assert_non_null(pool);
+  const double lab[ND_NTHETA] = {1, 0.005, 1e-4, 1, 1, 0.008, -0.004};
+  nds_model w;
+  nds_test_build(&w, 0.001, lab);
+  mjData *d = mj_makeData(w.m);
+  nd_rollout rs[NPUSH];
+  for (int i = 0; i < NPUSH; i++)
+    record_push(&w, d, push_yaw[i], push_ee[i], push_keys[i], 4, 0.3, 0.3, ND_CTRL_VELOCITY,
+                &rs[i]);
+  mj_deleteData(d);
+  nds_model_free(&w);
+
+  nds_model nm;
+  nds_test_build(&nm, 0.001, NULL);
+  nds_fit_cfg cfg;
+  nds_fit_cfg_default(&cfg);
+  cfg.pop = 16;
+  cfg.seed = 3;
+  cfg.replay.mode = NDS_REPLAY_VELOCITY;
+  memset(cfg.fit, 0, sizeof(cfg.fit));
+  cfg.fit[ND_TH_COM_X] = cfg.fit[ND_TH_COM_Y] = 1;
+  for (int k = ND_TH_COM_X; k <= ND_TH_COM_Y; k++) {
+    cfg.sigma0[k] = nds_fit_prior_std(0, 1.0, cfg.lower, k);
+    cfg.upper[k] = nm.cfg.obj_half[k - ND_TH_COM_X];
+  }
+  assert_near(cfg.sigma0[ND_TH_COM_X], 0.0025, 1e-15);
+  nds_fit *f = nds_fit_create(&nm, &cfg, pool, err, sizeof(err));
+  assert_non_null(f);
+  double L0;
+  assert_int_equal(nds_fit_loss(f, cfg.mu0, rs, NPUSH, &L0, NULL, err, sizeof(err)), 0);
+  nds_fit_out out;
+  for (int run = 0; run < 2; run++) {
+    assert_int_equal(nds_fit_run(f, rs, NPUSH, &out, err, sizeof(err)), 0);
+    printf("run %d: com %.2f %.2f mm (std %.2f %.2f), L(mean) %.3e (L at the centre %.3e)\n",
+           run, 1e3 * out.mean[ND_TH_COM_X], 1e3 * out.mean[ND_TH_COM_Y],
+           1e3 * out.std[ND_TH_COM_X], 1e3 * out.std[ND_TH_COM_Y], out.loss_mean, L0);
+  }
+  assert_near(out.mean[ND_TH_COM_X], 0.008, 0.0015);
+  assert_near(out.mean[ND_TH_COM_Y], -0.004, 0.0015);
+  assert_true(out.loss_mean < 0.5 * L0);
+  assert_near(out.mean[ND_TH_BOX_SCALE], 1, 0);  /* held */
+  nds_fit_free(f);
+
+  /* A shift is not searched as a log, and its bound must be a real one. */
+  nds_fit_cfg bad = cfg;
+  bad.logfit[ND_TH_COM_X] = 1;
+  assert_null(nds_fit_create(&nm, &bad, pool, err, sizeof(err)));
+  assert_non_null(strstr(err, "logfit needs a parameter that cannot be negative"));
+  bad = cfg;
+  bad.upper[ND_TH_COM_Y] = INFINITY;
+  assert_null(nds_fit_create(&nm, &bad, pool, err, sizeof(err)));
+  assert_non_null(strstr(err, "signed parameter's upper"));
+  for (int i = 0; i < NPUSH; i++) rec_free(&rs[i]);
+  nds_model_free(&nm);
+  nd_pool_free(pool);
+}
+
 /* A small fit of torsional friction alone (Q 16, C 2, seed 5), the others held. */
 static void torsion_cfg(nds_fit_cfg *cfg) {
   nds_fit_cfg_default(cfg);
@@ -1416,6 +1482,7 @@ int main(void) {
       cmocka_unit_test(test_fit_refine),
       cmocka_unit_test(test_fit_log_torsion),
       cmocka_unit_test(test_fit_scan),
+      cmocka_unit_test(test_fit_com),
       cmocka_unit_test(test_fit_workers_identical),
       cmocka_unit_test(test_fit_flat_no_contact),
       cmocka_unit_test(test_fit_phases),
