@@ -350,7 +350,19 @@ void nds_model_free(nds_model *nm) {
  * A box with its centre of mass moved off the origin (shifted 1) has neither: the general
  * path, which is exact for any body. Unshifted, the flags are as loaded, so the bits are
  * those of the model as built. Geoms and sites placed at the inertial frame (sameframe 2)
- * would move with it; they get the general path too. */
+ * would move with it; they get the general path too, and back when unshifted: the
+ * compiler marks exactly those whose pose is the inertial frame's as loaded. */
+/* A box geom's or site's sameframe flag for the box shifted or not (set_frames). */
+static mjtByte sameframe(const nds_model *nm, mjtByte flag, const mjtNum pos[3],
+                         const mjtNum quat[4], int shifted) {
+  const mjtNum *iq = nm->m->body_iquat + 4 * nm->obj_body;
+  if (shifted) return flag == 2 ? 0 : flag;
+  const int at_iframe = pos[0] == nm->obj_ipos0[0] && pos[1] == nm->obj_ipos0[1] &&
+                        pos[2] == nm->obj_ipos0[2] && quat[0] == iq[0] && quat[1] == iq[1] &&
+                        quat[2] == iq[2] && quat[3] == iq[3];
+  return flag == 0 && at_iframe ? 2 : flag;
+}
+
 static void set_frames(nds_model *nm, int shifted) {
   mjModel *m = nm->m;
   const int o = nm->obj_body, d0 = m->body_dofadr[o], nd = m->body_dofnum[o];
@@ -363,9 +375,13 @@ static void set_frames(nds_model *nm, int shifted) {
     m->dof_simplenum[i] = simple ? 1 + (i + 1 < m->nv ? m->dof_simplenum[i + 1] : 0) : 0;
   }
   for (int g = 0; g < m->ngeom; g++)
-    if (shifted && m->geom_bodyid[g] == o && m->geom_sameframe[g] == 2) m->geom_sameframe[g] = 0;
+    if (m->geom_bodyid[g] == o)
+      m->geom_sameframe[g] = sameframe(nm, m->geom_sameframe[g], m->geom_pos + 3 * g,
+                                       m->geom_quat + 4 * g, shifted);
   for (int s = 0; s < m->nsite; s++)
-    if (shifted && m->site_bodyid[s] == o && m->site_sameframe[s] == 2) m->site_sameframe[s] = 0;
+    if (m->site_bodyid[s] == o)
+      m->site_sameframe[s] = sameframe(nm, m->site_sameframe[s], m->site_pos + 3 * s,
+                                       m->site_quat + 4 * s, shifted);
 }
 
 int nds_theta_apply(nds_model *nm, const double theta[ND_NTHETA], char *err, int errlen) {

@@ -472,6 +472,53 @@ static void patch(char *s, const char *from, const char *to) {
   memcpy(p, to, strlen(to));
 }
 
+/* A box whose geom sits at its inertial frame (a file's, MuJoCo marks the geom sameframe
+ * 2): shifting the centre of mass must not carry the geom along, and unshifting gives the
+ * model as loaded, bit for bit. */
+static void test_theta_box_geom_at_iframe(void **state) {
+  (void)state;
+  nds_scene_cfg cfg;
+  nds_scene_cfg_default(&cfg);
+  cfg.obj_com[0] = 0.01;
+  char xml[4096], out[4200], err[512], path[64];
+  assert_int_equal(nds_scene_xml(&cfg, xml, sizeof(xml), err, sizeof(err)), 0);
+  const char *mark = "<geom name=\"object\" type=\"box\"";
+  char *at = strstr(xml, mark);
+  assert_non_null(at);
+  snprintf(out, sizeof(out), "%.*s<geom name=\"object\" pos=\"0.01 0 0\" type=\"box\"%s",
+           (int)(at - xml), xml, at + strlen(mark));
+  write_tmp(out, path);
+  nds_model a, b;
+  if (nds_model_load_file(&a, path, &cfg, err, sizeof(err))) fail_msg("%s", err);
+  if (nds_model_load_file(&b, path, &cfg, err, sizeof(err))) fail_msg("%s", err);
+  unlink(path);
+  int g = mj_name2id(a.m, mjOBJ_GEOM, "object");
+  assert_int_equal(a.m->geom_sameframe[g], 2);
+  double th[ND_NTHETA];
+  memcpy(th, nd_theta_true, sizeof(th));
+  th[ND_TH_COM_X] = -0.005, th[ND_TH_COM_Y] = 0.004;
+  assert_int_equal(nds_theta_apply(&a, th, err, sizeof(err)), 0);
+  mjData *d = mj_makeData(a.m);
+  mj_forward(a.m, d);
+  const int o = a.obj_body;
+  assert_near(d->geom_xpos[3 * g + 0] - d->xpos[3 * o + 0], 0.01, 1e-12);  /* not moved */
+  assert_near(d->geom_xpos[3 * g + 1] - d->xpos[3 * o + 1], 0, 1e-12);
+  assert_near(d->xipos[3 * o + 0] - d->xpos[3 * o + 0], 0.005, 1e-12);    /* the mass is */
+  assert_near(d->xipos[3 * o + 1] - d->xpos[3 * o + 1], 0.004, 1e-12);
+  mj_deleteData(d);
+  memcpy(th, nd_theta_true, sizeof(th));
+  assert_int_equal(nds_theta_apply(&a, th, err, sizeof(err)), 0);
+  const mjModel *ma = a.m, *mb = b.m;
+  assert_memory_equal(ma->geom_sameframe, mb->geom_sameframe, ma->ngeom);
+  assert_memory_equal(ma->body_sameframe, mb->body_sameframe, ma->nbody);
+  assert_memory_equal(ma->body_simple, mb->body_simple, ma->nbody);
+  assert_memory_equal(ma->dof_simplenum, mb->dof_simplenum, sizeof(int) * ma->nv);
+  assert_memory_equal(ma->body_ipos, mb->body_ipos, sizeof(mjtNum) * 3 * ma->nbody);
+  assert_memory_equal(ma->dof_invweight0, mb->dof_invweight0, sizeof(mjtNum) * ma->nv);
+  nds_model_free(&a);
+  nds_model_free(&b);
+}
+
 static void test_load_file(void **state) {
   (void)state;
   nds_scene_cfg cfg;
@@ -659,6 +706,7 @@ int main(void) {
       cmocka_unit_test(test_contacts_by_pair),
       cmocka_unit_test(test_state_round_trip),
       cmocka_unit_test(test_load_file),
+      cmocka_unit_test(test_theta_box_geom_at_iframe),
       cmocka_unit_test(test_ctrl),
       cmocka_unit_test(test_ctrl_stability_bound),
   };
