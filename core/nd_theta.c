@@ -72,25 +72,24 @@ void nd_theta_str(const double theta[ND_NTHETA], const char *sep, char *buf, int
   }
 }
 
-#define KEYS "slide, torsion, roll, mass, box_scale, com_x, com_y"
-
 int nd_theta_parse_mask(const char *s, const char *what, unsigned *mask, char *err,
                         int errlen) {
   unsigned m = 0;
   const char *p = s;
+  char keys[96];  /* every short name, for the messages */
+  nd_theta_mask_str((1u << ND_NTHETA) - 1, keys, sizeof(keys));
   for (;;) {
     const size_t n = strcspn(p, ",");
     int i = 0;
     while (i < ND_NTHETA && !(strlen(nd_theta_key[i]) == n && !strncmp(p, nd_theta_key[i], n)))
       i++;
     if (n == 0) {
-      snprintf(err, errlen, "%s: '%s': no parameter named (" KEYS ")", what,
-               s);
+      snprintf(err, errlen, "%s: '%s': no parameter named (%s)", what, s, keys);
       return -1;
     }
     if (i == ND_NTHETA) {
-      snprintf(err, errlen, "%s: unknown parameter '%.*s' (" KEYS ")", what,
-               (int)(n > 40 ? 40 : n), p);
+      snprintf(err, errlen, "%s: unknown parameter '%.*s' (%s)", what,
+               (int)(n > 40 ? 40 : n), p, keys);
       return -1;
     }
     if (m & (1u << i)) {

@@ -96,9 +96,16 @@ void nds_fit_cfg_default(nds_fit_cfg *cfg) {
   cfg->seed = 1;
 }
 
+void nds_fit_prior_range(double r, double D, double lower, int i, double *lo, double *hi) {
+  const double w = nd_theta_signed(i) ? D * NDS_FIT_COM_SPAN : D * r;
+  *lo = nd_theta_signed(i) ? r - w : fmax(lower, r - w);
+  *hi = r + w;
+}
+
 double nds_fit_prior_std(double r, double D, double lower, int i) {
-  if (nd_theta_signed(i)) return 2 * D * NDS_FIT_COM_SPAN / 16;
-  return (r + D * r - fmax(lower, r - D * r)) / 16;
+  double lo, hi;
+  nds_fit_prior_range(r, D, lower, i, &lo, &hi);
+  return (hi - lo) / 16;
 }
 
 double nds_fit_floor(const nds_fit_cfg *c, int i) {
@@ -164,7 +171,8 @@ int nds_fit_cfg_check(const nds_fit_cfg *c, char *err, int errlen) {
   int nfit = 0;
   for (int i = 0; i < ND_NTHETA; i++) {
     if (c->fit[i] != 0 && c->fit[i] != 1) {
-      snprintf(err, errlen, "fit: fit[%d] (%s) = %d, must be 0 or 1", i, nd_theta_key[i], c->fit[i]);
+      snprintf(err, errlen, "fit: fit[%d] (%s) = %d, must be 0 or 1", i, nd_theta_key[i],
+               c->fit[i]);
       return -1;
     }
     if (c->logfit[i] != 0 && c->logfit[i] != 1) {

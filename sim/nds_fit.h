@@ -107,8 +107,11 @@ void nds_fit_cfg_default(nds_fit_cfg *cfg);
 /* Check cfg. Return 0, or -1 naming the bad field. */
 int nds_fit_cfg_check(const nds_fit_cfg *cfg, char *err, int errlen);
 
-/* Prior std of entry i for nominal value r and uncertainty D: the paper's (r + D r -
- * max(lower, r - D r)) / 16, or 2 D NDS_FIT_COM_SPAN / 16 for a signed entry. */
+/* The prior's range of entry i for nominal value r and uncertainty D: the paper's
+ * [max(lower, r - D r), r + D r], or r -+ D NDS_FIT_COM_SPAN for a signed entry. */
+void nds_fit_prior_range(double r, double D, double lower, int i, double *lo, double *hi);
+
+/* Prior std of entry i: a sixteenth of that range, the paper's sigma_0. */
 double nds_fit_prior_std(double r, double D, double lower, int i);
 
 /* The least value entry i may take in a fit: cfg->lower, or -cfg->upper[i] for a signed

@@ -388,16 +388,8 @@ int nds_theta_apply(nds_model *nm, const double theta[ND_NTHETA], char *err, int
   if (nd_theta_check(theta, err, errlen)) return -1;
   mjModel *m = nm->m;
 
-  /* Every geom gets theta: contacts combine friction by maximum, so each contact sees
-   * theta exactly whichever pair it joins. */
-  for (int g = 0; g < m->ngeom; g++) {
-    m->geom_friction[3 * g + 0] = theta[ND_TH_SLIDE];
-    m->geom_friction[3 * g + 1] = theta[ND_TH_TORSION];
-    m->geom_friction[3 * g + 2] = theta[ND_TH_ROLL];
-  }
-
   /* The box's centre of mass must stay inside it, which a model's box may be smaller
-   * than ND_THETA_COM_MAX allows. */
+   * than ND_THETA_COM_MAX allows. Checked first: a refused theta changes nothing. */
   const int o = nm->obj_body, b = nm->ee_body;
   const double shift[2] = {theta[ND_TH_COM_X], theta[ND_TH_COM_Y]};
   for (int k = 0; k < 2; k++) {
@@ -408,6 +400,14 @@ int nds_theta_apply(nds_model *nm, const double theta[ND_NTHETA], char *err, int
                shift[k], c, nm->cfg.obj_half[k]);
       return -1;
     }
+  }
+
+  /* Every geom gets theta: contacts combine friction by maximum, so each contact sees
+   * theta exactly whichever pair it joins. */
+  for (int g = 0; g < m->ngeom; g++) {
+    m->geom_friction[3 * g + 0] = theta[ND_TH_SLIDE];
+    m->geom_friction[3 * g + 1] = theta[ND_TH_TORSION];
+    m->geom_friction[3 * g + 2] = theta[ND_TH_ROLL];
   }
 
   /* Scaled from the values as loaded, not from the current ones: repeated applications

@@ -66,10 +66,6 @@ int main(int argc, char **argv) {
   if (nds_model_init(&a.model, &sc, err, sizeof(err)) ||
       adapter_open_history(&a, &hs, err, sizeof(err)))
     goto done;
-  /* The box's centre of mass is fitted within the model's box, where the planner's model,
-   * built alike, takes it too. */
-  for (int k = 0; k < 2; k++)
-    fc.upper[ND_TH_COM_X + k] = fmin(fc.upper[ND_TH_COM_X + k], a.model.cfg.obj_half[k]);
   /* Seeded from the version reached, so a restart does not redraw the first run's samples. */
   fc.seed = o.seed + (uint64_t)(hs.have_last ? hs.last.version : 0);
   if (!(pool = nd_pool_create(o.threads, err, sizeof(err))) ||

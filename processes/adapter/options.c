@@ -136,6 +136,12 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
   if (fc->phases > 1 && !(o->replay_window > 0 && o->robust == 0 && fc->lm_iters == 0))
     return nd_opt_fail(&spec, "--replay-phases %d needs --replay-window above 0 and neither "
                        "--robust nor --lm-iters", fc->phases);
+  /* The box's centre of mass is fitted within the model's box (the adapter's model is the
+   * default scene, main.c), where the planner's model, built alike, takes it too. */
+  nds_scene_cfg box;
+  nds_scene_cfg_default(&box);
+  for (int k = 0; k < 2; k++)
+    fc->upper[ND_TH_COM_X + k] = fmin(fc->upper[ND_TH_COM_X + k], box.obj_half[k]);
   for (int i = 0; i < ND_NTHETA; i++) {
     /* The paper's width vanishes for a nominal value of 0 (a shift's is not the paper's). */
     if ((o->fit >> i & 1) && !nd_theta_signed(i) && !(o->ref[i] > 0.0))
@@ -144,26 +150,25 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
     /* The paper sizes the std from the true theta and draws the mean around it; here the
      * mean is given (--theta) and the nominal theta stands in for the truth. */
     const double r = o->ref[i], D = o->D;
-    /* A shift's range is +-D NDS_FIT_COM_SPAN about its nominal value, within the bounds. */
-    const double w = nd_theta_signed(i) ? D * NDS_FIT_COM_SPAN : D * r;
+    double lo, hi;
+    nds_fit_prior_range(r, D, fc->lower, i, &lo, &hi);
     fc->fit[i] = o->fit >> i & 1;
     fc->mu0[i] = o->theta[i];
     fc->sigma0[i] = nds_fit_prior_std(r, D, fc->lower, i);
     if ((o->scan >> i & 1) && fc->fit[i]) {
       fc->scan[i] = o->scan_points;
-      fc->scan_lo[i] = fmax(nds_fit_floor(fc, i), r - w);
-      fc->scan_hi[i] = fmin(fc->upper[i], r + w);
+      fc->scan_lo[i] = fmax(nds_fit_floor(fc, i), lo);
+      fc->scan_hi[i] = fmin(fc->upper[i], hi);
     }
     if ((o->logfit >> i & 1) && fc->fit[i]) {
       /* nds_fit takes a log parameter's std as theta times the std of ln theta. */
       fc->logfit[i] = 1;
-      fc->sigma0[i] = log((r + D * r) / fmax(fc->lower, r - D * r)) / 16 *
-                      fmax(fc->lower, o->theta[i]);
+      fc->sigma0[i] = log(hi / lo) / 16 * fmax(fc->lower, o->theta[i]);
       /* Searched within the prior's range: where the prior spans decades its top is
        * already where the parameter stops mattering (torsional friction 1 lets no box
        * turn), and the loss is flat beyond, which a log search would walk along for
        * decades (doc/decisions.md#log-upper). */
-      fc->upper[i] = fmax(r + D * r, o->theta[i]);
+      fc->upper[i] = fmax(hi, o->theta[i]);
     }
   }
   fc->replay.mode = o->replay_mode;

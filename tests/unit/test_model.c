@@ -167,6 +167,24 @@ static void test_theta_parse(void **state) {
   }
 }
 
+/* ma's masses and inertias (within inertia_tol) and what MuJoCo derives from them equal
+ * mb's: subtree masses, inverse weights, the mass matrix's diagonal at qpos0. */
+static void expect_mass_derived(const mjModel *ma, const mjModel *mb, double inertia_tol) {
+  for (int i = 0; i < ma->nbody; i++) {
+    assert_near(ma->body_mass[i], mb->body_mass[i], 1e-15);
+    assert_near(ma->body_subtreemass[i], mb->body_subtreemass[i], 1e-15);
+    for (int k = 0; k < 3; k++)
+      assert_near(ma->body_inertia[3 * i + k], mb->body_inertia[3 * i + k], inertia_tol);
+    for (int k = 0; k < 2; k++)
+      assert_near(ma->body_invweight0[2 * i + k], mb->body_invweight0[2 * i + k],
+                  1e-12 * fabs(mb->body_invweight0[2 * i + k]));
+  }
+  for (int i = 0; i < ma->nv; i++) {
+    assert_near(ma->dof_invweight0[i], mb->dof_invweight0[i], 1e-12 * mb->dof_invweight0[i]);
+    assert_near(ma->dof_M0[i], mb->dof_M0[i], 1e-12 * mb->dof_M0[i]);
+  }
+}
+
 /* Applying theta to a built model gives the model built with that theta: friction,
  * mass, inertia and every quantity MuJoCo derives from mass at compile time. */
 static void test_theta_apply_matches_build(void **state) {
@@ -182,19 +200,7 @@ static void test_theta_apply_matches_build(void **state) {
   assert_int_equal(nds_theta_apply(&a, th, err, sizeof(err)), 0);
   const mjModel *ma = a.m, *mb = b.m;
   for (int i = 0; i < 3 * ma->ngeom; i++) assert_near(ma->geom_friction[i], mb->geom_friction[i], 0);
-  for (int i = 0; i < ma->nbody; i++) {
-    assert_near(ma->body_mass[i], mb->body_mass[i], 1e-15);
-    assert_near(ma->body_subtreemass[i], mb->body_subtreemass[i], 1e-15);
-    for (int k = 0; k < 3; k++)
-      assert_near(ma->body_inertia[3 * i + k], mb->body_inertia[3 * i + k], 1e-18);
-    for (int k = 0; k < 2; k++)
-      assert_near(ma->body_invweight0[2 * i + k], mb->body_invweight0[2 * i + k],
-                  1e-12 * fabs(mb->body_invweight0[2 * i + k]));
-  }
-  for (int i = 0; i < ma->nv; i++) {
-    assert_near(ma->dof_invweight0[i], mb->dof_invweight0[i], 1e-12 * mb->dof_invweight0[i]);
-    assert_near(ma->dof_M0[i], mb->dof_M0[i], 1e-12 * mb->dof_M0[i]);
-  }
+  expect_mass_derived(ma, mb, 1e-18);
   assert_memory_equal(a.cfg.theta, th, sizeof(th));
   nds_model_free(&a);
   nds_model_free(&b);
@@ -220,19 +226,7 @@ static void test_theta_box_matches_build(void **state) {
   const int o = a.obj_body;
   assert_near(ma->body_mass[o], 0.55, 1e-15);
   for (int k = 0; k < 3; k++) assert_near(ma->body_ipos[3 * o + k], mb->body_ipos[3 * o + k], 0);
-  for (int i = 0; i < ma->nbody; i++) {
-    assert_near(ma->body_mass[i], mb->body_mass[i], 1e-15);
-    assert_near(ma->body_subtreemass[i], mb->body_subtreemass[i], 1e-15);
-    for (int k = 0; k < 3; k++)
-      assert_near(ma->body_inertia[3 * i + k], mb->body_inertia[3 * i + k], 1e-15);
-    for (int k = 0; k < 2; k++)
-      assert_near(ma->body_invweight0[2 * i + k], mb->body_invweight0[2 * i + k],
-                  1e-12 * fabs(mb->body_invweight0[2 * i + k]));
-  }
-  for (int i = 0; i < ma->nv; i++) {
-    assert_near(ma->dof_invweight0[i], mb->dof_invweight0[i], 1e-12 * mb->dof_invweight0[i]);
-    assert_near(ma->dof_M0[i], mb->dof_M0[i], 1e-12 * mb->dof_M0[i]);
-  }
+  expect_mass_derived(ma, mb, 1e-15);
   /* The default box is 6 cm deep: a 3.1 cm shift across it leaves it. */
   double out[ND_NTHETA];
   memcpy(out, th, sizeof(out));
@@ -240,6 +234,10 @@ static void test_theta_box_matches_build(void **state) {
   assert_int_equal(nds_theta_apply(&a, out, err, sizeof(err)), -1);
   assert_non_null(strstr(err, "theta[6] (box COM shift y) = -0.031 puts the centre of mass"));
   assert_near(ma->body_ipos[3 * o + 1], -0.004, 0);  /* refused: the model kept theta */
+  out[ND_TH_SLIDE] = 0.2;
+  assert_int_equal(nds_theta_apply(&a, out, err, sizeof(err)), -1);
+  assert_near(ma->geom_friction[0], 0.7, 0);  /* its frictions too */
+  assert_memory_equal(a.cfg.theta, th, sizeof(th));
   nds_model_free(&a);
   nds_model_free(&b);
 }
