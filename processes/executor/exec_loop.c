@@ -49,13 +49,12 @@ int exec_loop_cycle(exec_loop *s, double now, int64_t utime) {
       dirty = 1;
     }
     s->t_state = st.t_arrive;
-    /* A stopped robot brakes where it is and waits for the next task or PLACE: the setpoint
-     * stays on it (so it resumes without a jump) and no plan is followed until a fresh one. */
-    if (st.stopped && (!s->stopped || hypot(st.ee_pos[0] - s->stop_pos[0],
-                                            st.ee_pos[1] - s->stop_pos[1]) > EXEC_LOOP_STOP_STEP)) {
-      nd_exec_init(&s->ex, st.ee_pos, now);
-      memcpy(s->stop_pos, st.ee_pos, sizeof(s->stop_pos));
-    }
+    /* A stopped robot brakes its joints back to where the reflex read them, and that
+     * reading is the first stopped state's sphere: the setpoint is put there once and stays
+     * until the next task or PLACE resumes the robot. Following the brake's overshoot would
+     * move it in steps, and a step the robot sees just after it resumes is a Cartesian
+     * reflex (a 0.5 mm step reads as 500 m/s^2). No plan is followed until a fresh one. */
+    if (st.stopped && !s->stopped) nd_exec_init(&s->ex, st.ee_pos, now);
     if (st.stopped) s->have_plan = 0, s->pending = 0;
     s->stopped = st.stopped;
   }

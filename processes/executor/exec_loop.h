@@ -22,12 +22,6 @@
 
 #define EXEC_LOOP_REPORT_PERIOD 0.1  /* s between routine report posts */
 
-/* While the robot is stopped the setpoint follows it only in steps of this much, m: the
- * arm braking moves it on, the arm at rest stays on one setpoint, not on every reading's
- * noise, so it resumes from a still command (the robot's jerk reflex sees noise of 10 um
- * per step as 10^4 m/s^3). */
-#define EXEC_LOOP_STOP_STEP 5e-4
-
 /* Newest robot state: only what the loop needs, stamped with when it was sent. */
 typedef struct {
   double t_arrive;     /* ndp_mono() when it was sent (ndp_sent_mono): ages count from there */
@@ -99,7 +93,6 @@ typedef struct {
   double t_state;               /* send time of the newest robot state */
   int pending;                  /* plan taken but not yet applied */
   int stopped;                  /* the robot says a reflex stopped it */
-  double stop_pos[3];           /* where the setpoint was put while stopped */
   exec_loop_plan_in plan;
   int have_plan;                /* a plan has been accepted */
   double t_plan;                /* send time of the newest accepted plan */

@@ -354,11 +354,15 @@ static void test_cycle_allocates_nothing(void **state) {
   assert_true(st.peak_a > 0.5);  /* the far plans drive it near its limits */
 }
 
-/* The robot state as the loop's input: the sphere at p, received 0.2 ms before now. */
-static void post_state(double now, const double p[2]) {
-  exec_loop_state_in in = {.t_arrive = now - 2e-4, .ee_pos = {p[0], p[1], 0.025}, .stopped = 0};
+/* The robot state as the loop's input: the sphere at p, received 0.2 ms before now, the
+ * robot stopped by a reflex or not. */
+static void post_state_as(double now, const double p[2], int stopped) {
+  exec_loop_state_in in = {.t_arrive = now - 2e-4, .ee_pos = {p[0], p[1], 0.025},
+                           .stopped = stopped};
   nd_mailbox_post(&g_io.state, &in, (int)sizeof in);
 }
+
+static void post_state(double now, const double p[2]) { post_state_as(now, p, 0); }
 
 /* A plan received 0.2 ms before now, sent at utime - 200 us, starting on arrival; the
  * caller fills in what it is. */
@@ -463,6 +467,82 @@ static void test_resent_plan_after_restart(void **state) {
   assert_true(moved > 0.02);
   /* Every copy after the first renewed the segment instead of restarting it. */
   assert_true(rep.kept >= 4);
+}
+
+/* A reflex stops the robot mid-push: its brake carries the sphere 4 mm on and back to
+ * where the reflex read the joints, which is the first stopped state's sphere. The loop
+ * holds the setpoint there, still, until the robot resumes, whatever the readings do
+ * meanwhile and whatever plans arrive: the robot resumes on the command it holds, and a
+ * step in it just after (the loop cannot know the robot has resumed before the state
+ * says so) is a Cartesian reflex. After the resume a fresh plan is followed from there
+ * within the robot's Cartesian acceleration limit, 13 m/s^2. */
+static void test_stopped_hold(void **state) {
+  (void)state;
+  const nd_exec_cfg cfg = nd_exec_cfg_default();
+  exec_loop_io_init(&g_io);
+  exec_loop_init(&g_loop, &cfg, TIMEOUT, TIMEOUT, &g_io);
+  enum { STOP = 400, RESUME = 1400, END = 2200 };  /* ms */
+  double p[2] = {-0.05, 0.02}, stop_at[2] = {0.0, 0.0}, prev[3][2];
+  long held = 0, moved_stopped = 0, n_prev = 0, tracked_after = 0;
+  double a_max = 0.0, travel_after = 0.0;
+  for (long k = 0; k < END; k++) {
+    const double now = T0 + DT * (double)k;
+    const int64_t utime = U0 + 1000 * k;
+    const int stopped = k >= STOP && k < RESUME;
+    if (k == STOP) stop_at[0] = p[0], stop_at[1] = p[1];
+    if (stopped) {
+      /* The brake's overshoot and return, 4 mm at most along x. */
+      const double t = DT * (double)(k - STOP), ex = 4e-3 * (t / 0.05) * exp(1.0 - t / 0.05);
+      const double r[2] = {stop_at[0] + ex, stop_at[1]};
+      post_state_as(now, r, 1);
+    } else {
+      post_state(now, k >= RESUME ? stop_at : p);
+    }
+    /* The planner sends a plan every 50 ms throughout: a keypoint ahead of the sphere. */
+    if (k % 50 == 0) {
+      exec_loop_plan_in pl = plan_now(now, utime);
+      pl.plan_id = 1 + k / 50;
+      pl.T = 0.3;
+      pl.M = 1;
+      const double key[4] = {p[0] + 0.03, p[1] + 0.01, 0.2, 0.05};
+      memcpy(pl.keys[0], key, sizeof key);
+      nd_mailbox_post(&g_io.plan, &pl, (int)sizeof pl);
+    }
+    exec_loop_cycle(&g_loop, now, utime);
+    nudge_ee_cmd_t m;
+    while (pop_ee_cmd(&m)) {
+      /* The first stopped cycle puts the setpoint on the robot: from the next one on, the
+       * command must be continuous as the robot sees it. */
+      if (k > STOP) {
+        if (n_prev >= 2) {
+          const double ax = (m.p[0] - 2 * prev[0][0] + prev[1][0]) / (DT * DT);
+          const double ay = (m.p[1] - 2 * prev[0][1] + prev[1][1]) / (DT * DT);
+          if (hypot(ax, ay) > a_max) a_max = hypot(ax, ay);
+        }
+        prev[1][0] = prev[0][0], prev[1][1] = prev[0][1];
+        prev[0][0] = m.p[0], prev[0][1] = m.p[1];
+        n_prev++;
+      }
+      if (stopped && k > STOP) {
+        held += m.mode == ND_EXEC_HOLD && m.v[0] == 0.0 && m.v[1] == 0.0;
+        moved_stopped += m.p[0] != stop_at[0] || m.p[1] != stop_at[1];
+      }
+      if (k >= RESUME) {
+        tracked_after += m.mode == ND_EXEC_TRACK;
+        const double d = hypot(m.p[0] - stop_at[0], m.p[1] - stop_at[1]);
+        if (d > travel_after) travel_after = d;
+      }
+      if (!stopped) p[0] = m.p[0], p[1] = m.p[1];
+    }
+  }
+  printf("rtloop_stopped_a_max %.2f m/s^2\n", a_max);
+  printf("rtloop_resumed_travel %.1f mm\n", 1e3 * travel_after);
+  assert_true(hypot(stop_at[0] + 0.05, stop_at[1] - 0.02) > 0.01);  /* it was pushing */
+  assert_int_equal(moved_stopped, 0);
+  assert_int_equal(held, RESUME - STOP - 1);
+  assert_true(a_max <= 13.0);
+  assert_true(tracked_after > 0);
+  assert_true(travel_after > 0.01);
 }
 
 /* Latency compensation end to end: a planner that predicts the setpoint at a later start
@@ -756,6 +836,7 @@ int main(void) {
       cmocka_unit_test(test_counter_sees_calls),
       cmocka_unit_test(test_cycle_allocates_nothing),
       cmocka_unit_test(test_resent_plan_after_restart),
+      cmocka_unit_test(test_stopped_hold),
       cmocka_unit_test(test_workspace_plans),
       cmocka_unit_test(test_plan_start),
   };
