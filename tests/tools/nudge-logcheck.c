@@ -44,6 +44,7 @@ typedef struct {
   int first_success;
   double max_gap_ms;
   double max_ms;           /* stop-after */
+  int or_replanned;        /* stop-after: a brake a new plan took over passes too */
   double min_speed;        /* live */
   double max_travel;       /* ee-pos */
   int min_plans;           /* live */
@@ -297,6 +298,9 @@ typedef struct {
   int64_t t_stopping, t_hold;    /* the stop's first setpoint and its first at rest */
   double speed_stopping, acc_stopping;
   int64_t t_track_last;          /* last TRACKING setpoint after t0 */
+  double speed_last;             /* the last setpoint's speed */
+  int64_t t_replan;              /* first TRACKING setpoint after a stop run; 0: none */
+  double speed_replan_from, speed_replan_at;  /* that run's first and last speed */
 } stop_acc;
 
 static void stop_visit(const lcm_eventlog_event_t *ev, void *user) {
@@ -314,9 +318,16 @@ static void stop_visit(const lcm_eventlog_event_t *ev, void *user) {
   if (s->t_hold) return;
   if (m.mode == NUDGE_EE_CMD_T_MODE_TRACKING) {
     s->t_track_last = m.utime;
+    if (s->t_run && !s->t_replan) {
+      s->t_replan = m.utime;
+      s->speed_replan_from = s->speed_run;
+      s->speed_replan_at = s->speed_last;
+    }
     s->t_run = 0;
+    s->speed_last = norm3(m.v);
     return;
   }
+  s->speed_last = norm3(m.v);
   if (!s->t_run) {
     s->t_run = m.utime;
     s->speed_run = norm3(m.v);
@@ -337,6 +348,15 @@ static int cmd_stop_after(const lc_opts *o) {
   if (for_each(o->log, NDP_CH_EE_CMD, stop_visit, &s)) return 1;
   if (!s.have_before) fail("no setpoint at or before t0 %lld", (long long)o->t0);
   printf("stop_speed_at_t0 %.4f m/s\n", s.speed_t0);
+  if (s.t_replan) {
+    printf("stop_replanned_after %.1f ms\n", 1e-3 * (double)(s.t_replan - o->t0));
+    printf("stop_replanned_speed_from %.4f m/s\n", s.speed_replan_from);
+    printf("stop_replanned_speed_at %.4f m/s\n", s.speed_replan_at);
+  }
+  /* A plan can take over a brake before rest (a restarted planner): with --or-replanned
+   * that passes if the brake had slowed the setpoint by then. */
+  if (!s.t_hold && o->or_replanned && s.t_replan && s.speed_replan_at < s.speed_replan_from)
+    return 0;
   if (!s.t_hold) {
     fail("the executor never came to rest (HOLDING, zero speed) after t0");
     return 0;
@@ -1169,6 +1189,7 @@ static void usage(FILE *f) {
           "                   (HOLDING, zero speed); when the stop began (the run of\n"
           "                   non-tracking setpoints ending at rest), speeds, brake time\n"
           "      --max-ms M         fail if at rest later than M ms after U\n"
+          "      --or-replanned     also pass if a plan took over a brake that had slowed\n"
           "  last LOG CHANNEL newest utime and count of CHANNEL's valid messages\n"
           "      --before-utime U (at or before U), --after-utime U (after U)\n"
           "  status LOG NAME  heartbeat counters of process NAME: the last one, or\n"
@@ -1263,6 +1284,10 @@ static int parse_args(int argc, char **argv, lc_opts *o) {
     }
     if (!strcmp(a, "--allow-torn")) {
       o->allow_torn = 1;
+      continue;
+    }
+    if (!strcmp(a, "--or-replanned")) {
+      o->or_replanned = 1;
       continue;
     }
     if (i + 1 >= argc) {
