@@ -90,6 +90,7 @@ void nds_fit_cfg_default(nds_fit_cfg *cfg) {
   cfg->phases = 1;
   nds_replay_cfg_default(&cfg->replay, NDS_FIT_MODE_DEFAULT);
   cfg->replay.window = NDS_FIT_WINDOW;
+  cfg->replay.skip_clear = NDS_FIT_SKIP_CLEAR;
   cfg->step_std = NDS_FIT_STEP_STD;
   cfg->step_gate = NDS_FIT_STEP_GATE;
   cfg->rel_floor = NDS_FIT_REL_FLOOR;

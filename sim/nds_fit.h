@@ -35,6 +35,10 @@
  * step (nds_record, the study). doc/decisions.md#mocap-window */
 #define NDS_FIT_WINDOW_MOCAP 0.1
 
+/* A velocity replay's windows whose recorded sphere keeps this far (m) from the box are
+ * scored without stepping the model (nds_replay_cfg.skip_clear): they cannot tell theta. */
+#define NDS_FIT_SKIP_CLEAR 0.01
+
 /* The robust score's scale that ranked best when it was measured, m^2; the default ranks
  * by L instead (nds_fit_cfg.robust; doc/decisions.md#robust-score). */
 #define NDS_FIT_ROBUST_SCALE 1e-9

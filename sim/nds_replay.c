@@ -7,6 +7,7 @@
 #include <string.h>
 
 #include "nd_math.h"
+#include "nd_release.h"
 #include "nd_snap.h"
 
 /* As in nds_rollout: every warning counter starts here, so any warning during the replay
@@ -28,6 +29,7 @@ void nds_replay_cfg_default(nds_replay_cfg *cfg, int mode) {
   cfg->window = 0;
   cfg->smooth = 0;
   cfg->phase = 0;
+  cfg->skip_clear = 0;
 }
 
 int nds_replay_cfg_check(const nds_replay_cfg *cfg, char *err, int errlen) {
@@ -41,6 +43,8 @@ int nds_replay_cfg_check(const nds_replay_cfg *cfg, char *err, int errlen) {
   else if (!(cfg->phase == 0 || (cfg->phase > 0 && cfg->phase < cfg->window)))
     snprintf(err, errlen, "replay.phase = %g s, must be in [0, window = %g s)", cfg->phase,
              cfg->window);
+  else if (!(isfinite(cfg->skip_clear) && cfg->skip_clear >= 0))
+    snprintf(err, errlen, "replay.skip_clear = %g m, must be finite and >= 0", cfg->skip_clear);
   else
     return 0;
   return -1;
@@ -276,9 +280,60 @@ static long window_steps(const nds_replay_cfg *cfg, double mdt) {
   return cfg->window > 0 ? lround(fmax(1, cfg->window / mdt)) : 0;
 }
 
+/* 1 if over record steps a..b the sphere stays clear or more from the model's box at its
+ * pose at a, and the object still at that pose (see nds_replay.h). */
+static int window_clear(const nds_model *nm, const nd_rollout *r, int a, int b, double clear) {
+  const double *oa = nd_rollout_obj(r, a), yaw = nd_quat_yaw(oa + 3);
+  const nd_release_box box = {oa[0], oa[1], yaw, {nm->cfg.obj_half[0], nm->cfg.obj_half[1]}};
+  for (int i = a; i <= b; i++) {
+    const double *o = nd_rollout_obj(r, i);
+    double n[2];
+    if (hypot(o[0] - oa[0], o[1] - oa[1]) > NDS_REPLAY_STILL_POS ||
+        fabs(nd_wrap_angle(nd_quat_yaw(o + 3) - yaw)) > NDS_REPLAY_STILL_ROT ||
+        nd_release_gap(&box, nm->cfg.ee_radius, r->ee + 2 * i, n) < clear)
+      return 0;
+  }
+  return 1;
+}
+
 static void diverge(nds_replay_terms *out) {
   out->pos_o = out->pos_ee = out->rot_o = out->robust = NDS_REPLAY_DIVERGED;
   out->diverged = 1;
+}
+
+/* One model step of the replay from record step base (k record steps per model step):
+ * the sphere driven as cfg->mode says. Return 1 if MuJoCo warned (diverged), else 0. */
+static int sim_step(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
+                    const nds_ctrl_cfg *ctrl, nds_ctrl *pid, const nd_rollout *r, int base,
+                    int k) {
+  const mjModel *m = nm->m;
+  const int dof0 = nm->ee_dof[0], dof1 = nm->ee_dof[1];
+  const double vel[2] = {d->qvel[dof0], d->qvel[dof1]};
+  double f[2];
+  if (cfg->mode == NDS_REPLAY_SETPOINT) {
+    /* Exactly the episode's controller call: raw slide qpos, the model's step. */
+    double s[2][4];
+    nds_replay_sp_get(r->sp + 6 * base, s);
+    const double pos[2] = {d->qpos[nm->ee_qpos[0]], d->qpos[nm->ee_qpos[1]]};
+    nds_ctrl_pid(ctrl, pid, (const double(*)[4])s, pos, vel, m->opt.timestep, f);
+  } else {
+    /* The mean of the k recorded controls: for k = 1 exactly the recorded one. */
+    double u[2] = {0, 0};
+    for (int i = 0; i < k; i++) {
+      u[0] += r->u[2 * (base + i)];
+      u[1] += r->u[2 * (base + i) + 1];
+    }
+    u[0] /= k;
+    u[1] /= k;
+    if (cfg->mode == NDS_REPLAY_FORCE) f[0] = u[0], f[1] = u[1];
+    else nds_ctrl_vel(ctrl, pid, u, vel, f);
+  }
+  d->qfrc_applied[dof0] = f[0];
+  d->qfrc_applied[dof1] = f[1];
+  mj_step(m, d);
+  for (int w = 0; w < mjNWARNING; w++)
+    if (d->warning[w].number != WARN_START) return 1;
+  return 0;
 }
 
 /* The replay; stops once sp + k1 se + k2 sr > bound T, or with robust > 0 once the
@@ -303,9 +358,7 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
   nds_ctrl_cfg vc = cfg->ctrl;
   if (!(vc.kv > 0)) vc.kv = NDS_CTRL_M_REF / m->opt.timestep;  /* kv dt / m = 1: one step */
   const nds_ctrl_cfg *ctrl = &vc;
-  const int qx = nm->ee_qpos[0], qy = nm->ee_qpos[1];
   const int T = r->n / k; /* a trailing partial model step is not replayed */
-  const int dof0 = nm->ee_dof[0], dof1 = nm->ee_dof[1];
   out->steps = T;
 
   nds_state s0;
@@ -331,41 +384,33 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
   const double limit = robust > 0 ? bound * nwin : bound * T;
   long wlen = span < T ? span : T, wend = wlen;
   double rs = 0, ws = 0, wcap = robust > 0 ? wlen * robust * expm1(limit) : 0;
+  const int skip = mode == NDS_REPLAY_VELOCITY && W && cfg->skip_clear > 0;
+  long still_end = 0;  /* steps before it are a clear window's: predicted, not simulated */
+  const double *still_o = NULL;
   for (; j < T && !diverged && !cut; j++) {
     const int base = j * k;
-    if (W && j > 0 && (j + shift) % W == 0) reanchor(nm, d, cfg, r, base - 1);
-    const double vel[2] = {d->qvel[dof0], d->qvel[dof1]};
-    double f[2];
-    if (mode == NDS_REPLAY_SETPOINT) {
-      /* Exactly the episode's controller call: raw slide qpos, the model's step. */
-      double s[2][4];
-      nds_replay_sp_get(r->sp + 6 * base, s);
-      const double pos[2] = {d->qpos[qx], d->qpos[qy]};
-      nds_ctrl_pid(ctrl, &pid, (const double(*)[4])s, pos, vel, mdt, f);
-    } else {
-      /* The mean of the k recorded controls: for k = 1 exactly the recorded one. */
-      double u[2] = {0, 0};
-      for (int i = 0; i < k; i++) {
-        u[0] += r->u[2 * (base + i)];
-        u[1] += r->u[2 * (base + i) + 1];
-      }
-      u[0] /= k;
-      u[1] /= k;
-      if (mode == NDS_REPLAY_FORCE) f[0] = u[0], f[1] = u[1];
-      else nds_ctrl_vel(ctrl, &pid, u, vel, f);
-    }
-    d->qfrc_applied[dof0] = f[0];
-    d->qfrc_applied[dof1] = f[1];
-    mj_step(m, d);
-    for (int w = 0; w < mjNWARNING; w++)
-      if (d->warning[w].number != WARN_START) diverged = 1;
-    if (diverged) break;
-
     double obj[ND_ROLLOUT_OBJ], ee[2];
-    nds_replay_observe(nm, d, obj, ee);
     const double *oo = r->obj + ND_ROLLOUT_OBJ * (base + k - 1), *oe = r->ee + 2 * (base + k - 1);
-    double dx = obj[0] - oo[0], dy = obj[1] - oo[1];
-    double ex = ee[0] - oe[0], ey = ee[1] - oe[1];
+    const int anchor = W && j > 0 && (j + shift) % W == 0;
+    if (skip && (j == 0 || anchor)) {
+      const long end = j + W - (j + shift) % W < T ? j + W - (j + shift) % W : T;
+      const int a = j > 0 ? base - 1 : 0;
+      if (window_clear(nm, r, a, (int)(end * k - 1), cfg->skip_clear)) {
+        still_end = end;
+        still_o = nd_rollout_obj(r, a);
+      }
+    }
+    if (j < still_end) {
+      memcpy(obj, still_o, sizeof(obj));
+      memcpy(ee, oe, sizeof(ee));
+      out->skipped++;
+    } else {
+      if (anchor) reanchor(nm, d, cfg, r, base - 1);
+      if ((diverged = sim_step(nm, d, cfg, ctrl, &pid, r, base, k))) break;
+      nds_replay_observe(nm, d, obj, ee);
+    }
+    const double dx = obj[0] - oo[0], dy = obj[1] - oo[1];
+    const double ex = ee[0] - oe[0], ey = ee[1] - oe[1];
     const double po = dx * dx + dy * dy, pe = ex * ex + ey * ey;
     /* The angle between the unit vectors v(phi) and v(phi~), i.e. arccos(v^T v~) in
      * [0, pi], taken as the wrapped difference: arccos near 1 loses half the digits

@@ -54,7 +54,20 @@ typedef struct {
   double phase;        /* s, in [0, window): the anchors fall window - phase, 2 window -
                           phase, ... into the record; 0, the default: window, 2 window, ...
                           (the robust score's windows stay unshifted) */
+  double skip_clear;   /* m; > 0 in VELOCITY with window > 0: windows clear of contact are
+                          predicted, not simulated (below); 0, the default: none */
 } nds_replay_cfg;
+
+/* Clear windows. In VELOCITY the sphere follows its record whatever theta (its gains
+ * scale with its mass), so a window in which the recorded sphere stays skip_clear or more
+ * from the model's box at the anchor, and the recorded object stays within
+ * NDS_REPLAY_STILL_POS and NDS_REPLAY_STILL_ROT of its anchor pose, tells nothing about
+ * theta. Its steps are scored as
+ * the object resting at the anchor and the sphere on its record, without stepping the
+ * model; which windows are clear depends on the record alone, so every candidate theta
+ * skips the same ones. */
+#define NDS_REPLAY_STILL_POS 1e-3  /* m: a box pushed or coasting moves more in a window */
+#define NDS_REPLAY_STILL_ROT 0.02  /* rad: ten times motion capture's noise on the lab */
 
 /* Re-anchoring (multiple shooting). With window > 0, every window seconds of model time
  * the replay puts what was observed back into the model: the object's full pose (position
@@ -97,6 +110,7 @@ typedef struct {
   int diverged;   /* non-finite state or a MuJoCo warning; terms are NDS_REPLAY_DIVERGED */
   int cut;        /* nds_replay_bounded stopped early: terms are the sums so far / T,
                      lower bounds of the full replay's */
+  int skipped;    /* of the steps compared, those of clear windows (cfg.skip_clear) */
   double robust;  /* nds_replay_bounded with robust > 0: the windows' score (below);
                      else 0 */
 } nds_replay_terms;

@@ -45,6 +45,7 @@ typedef struct {
   double replay_dt;           /* model timestep of the replays, s */
   int replay_mode;            /* NDS_REPLAY_* */
   double replay_window;       /* s */
+  double replay_skip;         /* m */
   double anchor_fit;          /* s: half-width of the anchors' fit (nds_replay_cfg.smooth) */
   double robust;              /* m^2: CEM ranks by the robust score; 0: by L (nds_fit.h) */
   double score[ND_NTHETA];    /* --score: theta to evaluate; NAN: watch and refit */

@@ -35,6 +35,7 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
   o->replay_dt = 0.001;
   o->replay_mode = fc->replay.mode;
   o->replay_window = NDS_FIT_WINDOW_MOCAP;
+  o->replay_skip = fc->replay.skip_clear;
   for (int i = 0; i < ND_NTHETA; i++) o->score[i] = NAN;
   nd_opt opts[] = {
       {"buffer", ND_OPT_STRING, &o->buffer, .arg = "FILE",
@@ -84,6 +85,10 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
        .help = "re-anchor each replay on the observed pose every S s (for poses interpolated "
                "from 240 Hz MOCAP; 0.005 for poses observed at every step, as the study's; 0: "
                "one shot, the paper's)"},
+      {"replay-skip", ND_OPT_DOUBLE, &o->replay_skip, 0, 1, .arg = "M",
+       .help = "with velocity replay and a window: windows whose recorded sphere keeps M m "
+               "from the box, the box at rest, are scored without stepping the model; they "
+               "cannot tell theta (0: every window stepped)"},
       {"anchor-fit", ND_OPT_DOUBLE, &o->anchor_fit, 0, 1, .arg = "S",
        .help = "re-anchor the object on a straight-line fit of its observations within S s "
                "(of the fits around, before and after the anchor the closest), which averages "
@@ -174,6 +179,7 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
   fc->replay.mode = o->replay_mode;
   fc->replay.window = o->replay_window;
   fc->replay.smooth = o->anchor_fit;
+  fc->replay.skip_clear = o->replay_skip;
   fc->robust = o->robust;
   return ND_OPT_RUN;
 }

@@ -148,15 +148,15 @@ void adapter_banner(const adapter *a, const nds_fit *fit, const nds_fit_cfg *fc,
   if (fc->robust > 0) snprintf(rank, sizeof(rank), "the robust score of scale %g m^2", fc->robust);
   fprintf(stderr,
           PROG ": buffer %s, history %s (%lld entries%s), fit %s, CEM Q %d C %d rho %.2g, "
-          "prior D %g on (%s), %s (%s) std (%s), replay %s dt %g s window %g s x %d phase(s), "
-          "scan %s (%d points), ranked by %s, "
+          "prior D %g on (%s), %s (%s) std (%s), replay %s dt %g s window %g s x %d phase(s) "
+          "skip clear %g m, scan %s (%d points), ranked by %s, "
           "LM %d iterations, %d worker(s), nice %d, %s\n",
           o->buffer, o->history, (long long)hs->entries, hs->have_last ? ", resuming" : "",
           fitted, fc->pop, fc->iters, fc->elite_frac, o->D, ref,
           hs->have_last ? "from version" : "prior", mean, std,
           nds_replay_mode_name(fc->replay.mode), o->replay_dt,
-          fc->replay.window, fc->phases, scanned, o->scan_points, rank, fc->lm_iters, o->threads,
-          o->nice, ndp_url(o->url));
+          fc->replay.window, fc->phases, fc->replay.skip_clear, scanned, o->scan_points, rank,
+          fc->lm_iters, o->threads, o->nice, ndp_url(o->url));
   if (hs->have_last)
     fprintf(stderr, PROG ": resuming after version %lld (fit on %d rollout(s) of the buffer "
             "created %lld us)\n", (long long)hs->last.version, (int)hs->last.buffer_size,

@@ -36,9 +36,14 @@ int adapter_score(const adapter_opts *o, const nds_fit_cfg *fc) {
     goto done;
   /* The terms summed over the rollouts: which of them the loss is made of. */
   double po = 0, pe = 0, ro = 0;
-  for (int i = 0; i < n; i++) po += per[i].pos_o, pe += per[i].pos_ee, ro += per[i].rot_o;
+  long steps = 0, skipped = 0;
+  for (int i = 0; i < n; i++) {
+    po += per[i].pos_o, pe += per[i].pos_ee, ro += per[i].rot_o;
+    steps += per[i].steps, skipped += per[i].skipped;
+  }
   printf("rollouts %d count\nloss_obj_pos %.6g m^2\nloss_ee_pos %.6g m^2\nloss_obj_rot %.6g rad\n"
-         "loss %.6g m^2\n", n, po, pe, ro, L);
+         "loss %.6g m^2\nreplay_steps %ld count\nreplay_steps_clear %ld count\n", n, po, pe, ro,
+         L, steps, skipped);
   /* The fitted parameters' standard errors at this theta (nds_fit_cov). */
   double sd[ND_NTHETA];
   if (nds_fit_cov(fit, o->score, rs, n, sd, err, sizeof(err))) goto done;

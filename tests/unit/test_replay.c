@@ -451,6 +451,95 @@ static void test_replay_velocity(void **state) {
   nds_model_free(&nm);
 }
 
+/* Clear windows (nds_replay_cfg.skip_clear 1 cm) on velocity records of the three pushes,
+ * each starting 2.5 cm from contact, at the adapter's 0.1 s windows and the fit's 5 ms.
+ * Whatever theta, scoring the clear windows without stepping changes L by one amount:
+ * they cannot tell theta, so candidates rank alike. A record that never comes near the
+ * box is skipped whole and scores the same under every theta; a window in which the box
+ * moves (2 mm, the sphere far) is stepped; FORCE never skips. */
+static void test_replay_skip(void **state) {
+  (void)state;
+  char err[256];
+  nds_model nm;
+  nds_test_build(&nm, 0.001, NULL);
+  mjData *d = mj_makeData(nm.m);
+  nd_rollout rs[NPUSH + 1];
+  for (int i = 0; i < NPUSH; i++)
+    record_push(&nm, d, push_yaw[i], push_ee[i], push_keys[i], 4, 0.3, 0.3, ND_CTRL_VELOCITY,
+                &rs[i]);
+  const double away[16] = {-0.12, 0, -0.1, 0, -0.16, 0.02, -0.1, 0,
+                           -0.2, 0.02, 0, 0, -0.2, 0.02, 0, 0};
+  const double ee0[2] = {-0.1, 0};
+  record_push(&nm, d, 0, ee0, away, 4, 0.3, 0.3, ND_CTRL_VELOCITY, &rs[NPUSH]);
+  const double thetas[4][ND_NTHETA] = {{1, 0.005, 1e-4, 1, 1, 0, 0},
+                                       {0.6, 0.005, 1e-4, 1, 1, 0, 0},
+                                       {1, 0.02, 1e-4, 2, 1, 0, 0},
+                                       {1.2, 0.005, 1e-4, 0.5, 1, 0.008, -0.004}};
+  nds_fit_cfg fc;
+  nds_fit_cfg_default(&fc);
+  assert_true(fc.replay.skip_clear == NDS_FIT_SKIP_CLEAR);
+  const double windows[2] = {0.1, fc.replay.window};
+  for (int w = 0; w < 2; w++) {
+    nds_replay_cfg full, skip;
+    nds_replay_cfg_default(&full, NDS_REPLAY_VELOCITY);
+    full.window = windows[w];
+    skip = full;
+    skip.skip_clear = NDS_FIT_SKIP_CLEAR;
+    double gap0 = 0, L0 = 0;
+    for (int th = 0; th < 4; th++) {
+      assert_int_equal(nds_theta_apply(&nm, thetas[th], err, sizeof(err)), 0);
+      double Lf = 0, Ls = 0;
+      long skipped = 0, steps = 0;
+      for (int i = 0; i < NPUSH; i++) {
+        nds_replay_terms tf, ts;
+        assert_int_equal(nds_replay(&nm, d, &full, &rs[i], &tf, NULL, err, sizeof(err)), 0);
+        assert_int_equal(nds_replay(&nm, d, &skip, &rs[i], &ts, NULL, err, sizeof(err)), 0);
+        assert_int_equal(tf.skipped, 0);
+        assert_true(ts.skipped > 0 && ts.skipped < ts.steps);
+        Lf += nds_replay_loss(&tf, fc.k1, fc.k2);
+        Ls += nds_replay_loss(&ts, fc.k1, fc.k2);
+        skipped += ts.skipped, steps += ts.steps;
+      }
+      if (th == 0) gap0 = Lf - Ls, L0 = Lf;
+      printf("window %g s theta %d: L %.6e, skipping %.6e (%ld of %ld steps), L - L(truth) "
+             "%.3e\n", windows[w], th, Lf, Ls, skipped, steps, Lf - L0);
+      /* The same offset under every theta, to 1e-4 of how far theta moves L (a shifted
+       * centre of mass lets the resting box settle by nanometres in a stepped window). */
+      if (th > 0) assert_near(Lf - Ls, gap0, 1e-4 * fabs(Lf - L0));
+      assert_true(th == 0 || fabs(Lf - L0) > 1e-3 * L0);
+      /* Never touching: skipped whole, the same under every theta. */
+      nds_replay_terms ta;
+      assert_int_equal(nds_replay(&nm, d, &skip, &rs[NPUSH], &ta, NULL, err, sizeof(err)), 0);
+      assert_int_equal(ta.skipped, ta.steps);
+      assert_true(ta.pos_o == 0 && ta.pos_ee == 0 && ta.rot_o == 0);
+    }
+  }
+  /* The box moved 2 mm within 0.2-0.3 s of a rest record, the sphere 20 cm away: that
+   * window is stepped, the others are not. */
+  nd_rollout rest;
+  nds_state s0;
+  const double far[2] = {-0.3, 0.2};
+  rest_record(&nm, 500, ND_CTRL_VELOCITY, far, &rest, &s0);
+  for (int k = 200; k < 300; k++) nd_rollout_obj(&rest, k)[0] += 0.002 * (k - 199) / 100.0;
+  for (int k = 300; k < 500; k++) nd_rollout_obj(&rest, k)[0] += 0.002;
+  nds_replay_cfg skip;
+  nds_replay_cfg_default(&skip, NDS_REPLAY_VELOCITY);
+  skip.window = 0.1;
+  skip.skip_clear = 0.01;
+  nds_replay_terms t;
+  assert_int_equal(nds_replay(&nm, d, &skip, &rest, &t, NULL, err, sizeof(err)), 0);
+  assert_int_equal(t.skipped, 400);
+  /* FORCE: the sphere's own motion depends on its mass, so nothing is skipped. */
+  nds_replay_cfg force = skip;
+  force.mode = NDS_REPLAY_FORCE;
+  assert_int_equal(nds_replay(&nm, d, &force, &push[0], &t, NULL, err, sizeof(err)), 0);
+  assert_int_equal(t.skipped, 0);
+  rec_free(&rest);
+  for (int i = 0; i <= NPUSH; i++) rec_free(&rs[i]);
+  mj_deleteData(d);
+  nds_model_free(&nm);
+}
+
 /* r's object as motion capture would give it: frames at 240 Hz of src's poses, each taken
  * at the step nearest its time, noise times the lab's noise (0.1 mm and 2e-3 rad per
  * axis), joined to every step by nd_recorder_join as the recorder joins them. */
@@ -1472,6 +1561,7 @@ int main(void) {
       cmocka_unit_test(test_replay_bowl),
       cmocka_unit_test(test_replay_ratio),
       cmocka_unit_test(test_replay_velocity),
+      cmocka_unit_test(test_replay_skip),
       cmocka_unit_test(test_replay_anchor_fit),
       cmocka_unit_test(test_replay_frames_join),
       cmocka_unit_test(test_replay_anchor_stop),
