@@ -393,7 +393,8 @@ static int replay(const nds_model *nm, mjData *d, const nds_replay_cfg *cfg,
     const double *oo = r->obj + ND_ROLLOUT_OBJ * (base + k - 1), *oe = r->ee + 2 * (base + k - 1);
     const int anchor = W && j > 0 && (j + shift) % W == 0;
     if (skip && (j == 0 || anchor)) {
-      const long end = j + W - (j + shift) % W < T ? j + W - (j + shift) % W : T;
+      long end = j + W - (j + shift) % W;  /* the next anchor */
+      if (end > T) end = T;
       const int a = j > 0 ? base - 1 : 0;
       if (window_clear(nm, r, a, (int)(end * k - 1), cfg->skip_clear)) {
         still_end = end;

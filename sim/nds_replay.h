@@ -62,10 +62,9 @@ typedef struct {
  * scale with its mass), so a window in which the recorded sphere stays skip_clear or more
  * from the model's box at the anchor, and the recorded object stays within
  * NDS_REPLAY_STILL_POS and NDS_REPLAY_STILL_ROT of its anchor pose, tells nothing about
- * theta. Its steps are scored as
- * the object resting at the anchor and the sphere on its record, without stepping the
- * model; which windows are clear depends on the record alone, so every candidate theta
- * skips the same ones. */
+ * theta. Its steps are scored as the object resting at the anchor and the sphere on its
+ * record, without stepping the model. Which windows are clear depends on the record
+ * alone, so every candidate theta skips the same ones. */
 #define NDS_REPLAY_STILL_POS 1e-3  /* m: a box pushed or coasting moves more in a window */
 #define NDS_REPLAY_STILL_ROT 0.02  /* rad: ten times motion capture's noise on the lab */
 
