@@ -51,9 +51,10 @@ int exec_loop_cycle(exec_loop *s, double now, int64_t utime) {
     s->t_state = st.t_arrive;
     /* A stopped robot brakes its joints back to where the reflex read them, and that
      * reading is the first stopped state's sphere: the setpoint is put there once and stays
-     * until the next task or PLACE resumes the robot. Following the brake's overshoot would
-     * move it in steps, and a step the robot sees just after it resumes is a Cartesian
-     * reflex (a 0.5 mm step reads as 500 m/s^2). No plan is followed until a fresh one. */
+     * until the next task or PLACE resumes the robot, whatever the brake's overshoot. The
+     * loop hears of a resume a cycle late, so any step in a stopped robot's setpoint can
+     * reach it resumed: a Cartesian reflex (0.5 mm in a cycle reads as 500 m/s^2). No
+     * plan is followed until a fresh one. */
     if (st.stopped && !s->stopped) nd_exec_init(&s->ex, st.ee_pos, now);
     if (st.stopped) s->have_plan = 0, s->pending = 0;
     s->stopped = st.stopped;

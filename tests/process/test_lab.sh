@@ -265,9 +265,10 @@ if pt_up_wait "$KILL" 30 "$up"; then
     v=$(fig stop_speed_at_stopping "$PT_WORK/kill-stop")
     [[ -n $v ]] || v=$(fig stop_replanned_speed_from "$PT_WORK/kill-stop")
     pt_figure lab_kill_brake_speed "${v:-0}" m/s
+    braked=$(fig stop_hold_after "$PT_WORK/kill-stop")
+    braked+=$(fig stop_replanned_after "$PT_WORK/kill-stop")
     pt_check "the executor braked after the planner died: to rest, or until the new one planned" \
-      test "$lc_rc" -eq 0 -a -n "$(fig stop_hold_after "$PT_WORK/kill-stop")$(fig \
-      stop_replanned_after "$PT_WORK/kill-stop")"
+      test "$lc_rc" -eq 0 -a -n "$braked"
   else
     pt_fail "no PLAN before the kill in the log"
   fi

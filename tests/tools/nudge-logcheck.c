@@ -298,7 +298,7 @@ typedef struct {
   int64_t t_stopping, t_hold;    /* the stop's first setpoint and its first at rest */
   double speed_stopping, acc_stopping;
   int64_t t_track_last;          /* last TRACKING setpoint after t0 */
-  double speed_last;             /* the last setpoint's speed */
+  double speed_run_last;         /* the current stop run's newest speed */
   int64_t t_replan;              /* first TRACKING setpoint after a stop run; 0: none */
   double speed_replan_from, speed_replan_at;  /* that run's first and last speed */
 } stop_acc;
@@ -321,13 +321,12 @@ static void stop_visit(const lcm_eventlog_event_t *ev, void *user) {
     if (s->t_run && !s->t_replan) {
       s->t_replan = m.utime;
       s->speed_replan_from = s->speed_run;
-      s->speed_replan_at = s->speed_last;
+      s->speed_replan_at = s->speed_run_last;
     }
     s->t_run = 0;
-    s->speed_last = norm3(m.v);
     return;
   }
-  s->speed_last = norm3(m.v);
+  s->speed_run_last = norm3(m.v);
   if (!s->t_run) {
     s->t_run = m.utime;
     s->speed_run = norm3(m.v);

@@ -482,7 +482,7 @@ static void test_stopped_hold(void **state) {
   exec_loop_io_init(&g_io);
   exec_loop_init(&g_loop, &cfg, TIMEOUT, TIMEOUT, &g_io);
   enum { STOP = 400, RESUME = 1400, END = 2200 };  /* ms */
-  double p[2] = {-0.05, 0.02}, stop_at[2] = {0.0, 0.0}, prev[3][2];
+  double p[2] = {-0.05, 0.02}, stop_at[2] = {0.0, 0.0}, prev[2][2];
   long held = 0, moved_stopped = 0, n_prev = 0, tracked_after = 0;
   double a_max = 0.0, travel_after = 0.0;
   for (long k = 0; k < END; k++) {
