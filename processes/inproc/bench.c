@@ -250,6 +250,8 @@ fail:
 int main(int argc, char **argv) {
   char err[512];
   int sections = SEC_PLAN | SEC_PREDICT | SEC_LAB | SEC_FIT;
+  double lab_theta[ND_NTHETA];
+  memcpy(lab_theta, nd_theta_true, sizeof(lab_theta));
   int reps = 30;
   double plan_dt = 0.005, robust = NDS_FIT_ROBUST_SCALE;
   nd_opt opts[] = {
@@ -258,6 +260,11 @@ int main(int argc, char **argv) {
        .help = "planning model timestep, s"},
       {"robust", ND_OPT_DOUBLE, &robust, 1e-12, 1, .arg = "S",
        .help = "scale of the robust score timed as refit_s_10x5s_robust, m^2"},
+      {"theta", ND_OPT_THETA, lab_theta, .arg = "S,T,R,M[,B,X,Y]",
+       .def = "the model's own",
+       .help = "theta of the planning model the lab section holds against the worlds, e.g. a "
+               "fit's (nudge-adapter's PARAMS): does it predict the lab better than the "
+               "model's own?"},
       {"sections", ND_OPT_CUSTOM, &sections, .parse = parse_sections, .arg = "LIST",
        .def = "plan,predict,lab,fit",
        .help = "what to measure: plan (mj_step rate, batches, plan latency with and without "
@@ -453,10 +460,10 @@ int main(int argc, char **argv) {
    * direction (0.45 m/s, 1.8 m/s^2; the live planner goes beyond where its arm map lets it,
    * doc/decisions.md#lab-caps), tracked by the arm in 1 ms steps, each
    * timed; the arm's tracking error and reflex stops; the planning model at 5 ms and at the
-   * live planner's 10 ms against the lab world's outcome, next to the same against the
-   * ideal world. */
+   * live planner's 10 ms (at --theta) against the lab world's outcome, next to the same
+   * against the ideal world: the object's position and yaw at the horizon. */
   enum { NLAB = 32 };
-  double lab_fig[12] = {0};
+  double lab_fig[14] = {0};
   if (sections & SEC_LAB) {
     static double step_us[2][NLAB * 4000], track[2][NLAB * 4000];
     static double truth[2][NLAB][3];
@@ -472,13 +479,15 @@ int main(int argc, char **argv) {
         return 1;
       }
     const double pdts[2] = {0.005, 0.010};
-    double pe[2][2];
+    double pe[2][2], ye[2][2], yerr[NLAB];
     for (int j = 0; j < 2; j++) {
       nds_scene_cfg c;
       nds_scene_cfg_planning(&c, pdts[j]);
       nds_model m2 = {0};
-      if (nds_model_init(&m2, &c, err, sizeof(err))) {
+      if (nds_model_init(&m2, &c, err, sizeof(err)) ||
+          nds_theta_apply(&m2, lab_theta, err, sizeof(err))) {
         fprintf(stderr, "nudge-bench: %s\n", err);
+        nds_model_free(&m2);
         return 1;
       }
       mjData *d2 = mj_makeData(m2.m);
@@ -490,8 +499,10 @@ int main(int argc, char **argv) {
           nds_rollout_out o;
           nds_rollout(&m2, d2, &ctrl, &s8, sp8, keys + 8 * i, M, Ts[i], &o);
           perr[i] = hypot(o.obj_xy[0] - truth[k][i][0], o.obj_xy[1] - truth[k][i][1]);
+          yerr[i] = 180.0 / M_PI * fabs(remainder(o.obj_yaw - truth[k][i][2], 2.0 * M_PI));
         }
         pe[j][k] = nd_quantile(perr, NLAB, 0.5);
+        ye[j][k] = nd_quantile(yerr, NLAB, 0.5);
       }
       mj_deleteData(d2);
       nds_model_free(&m2);
@@ -506,6 +517,7 @@ int main(int argc, char **argv) {
     lab_fig[6] = pe[0][1], lab_fig[7] = pe[0][0], lab_fig[8] = pe[1][1], lab_fig[9] = pe[1][0];
     lab_fig[10] = wf[1].stops;
     lab_fig[11] = nd_quantile(Ts, NLAB, 0.5);
+    lab_fig[12] = ye[1][1], lab_fig[13] = ye[1][0];
     printf("lab world, %d pushes (segments of %.2f s median): %d reflex stops; step p50 %.1f us, p99 %.1f us, mean %.1f us (%.1f %% of a core "
            "at 1 kHz; the ideal world's p50 %.1f us); the arm's tracking error p50 %.2f mm, "
            "p99 %.2f mm\n", NLAB, lab_fig[11], wf[1].stops, lab_fig[0], lab_fig[1], lab_mean, 100 * lab_fig[2],
@@ -513,6 +525,9 @@ int main(int argc, char **argv) {
     printf("planning model against the world's outcome at the pushes' end, object position error "
            "median: 5 ms model: lab %.4f m, ideal %.4f m; 10 ms model: lab %.4f m, ideal %.4f m\n",
            pe[0][1], pe[0][0], pe[1][1], pe[1][0]);
+    printf("  its yaw error median: 5 ms model: lab %.2f deg, ideal %.2f deg; 10 ms model: lab "
+           "%.2f deg, ideal %.2f deg (theta %s)\n", ye[0][1], ye[0][0], ye[1][1], ye[1][0],
+           memcmp(lab_theta, nd_theta_true, sizeof(lab_theta)) ? "--theta" : "the model's own");
   }
 
   if (sections & SEC_FIT) {
@@ -636,6 +651,8 @@ int main(int argc, char **argv) {
            lab_fig[7]);
     printf("prediction_error_lab_10ms %.4f m\nprediction_error_ideal_10ms %.4f m\n", lab_fig[8],
            lab_fig[9]);
+    printf("prediction_yaw_error_lab_10ms %.2f deg\nprediction_yaw_error_ideal_10ms %.2f deg\n",
+           lab_fig[12], lab_fig[13]);
   }
 
   free(perr);
