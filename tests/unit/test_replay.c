@@ -91,6 +91,13 @@ static const double push_keys[NPUSH][16] = {
     {-0.05, 0.01, 0.2, 0, 0.02, 0.01, 0.2, 0, 0.07, 0.01, 0.05, 0, 0.08, 0.01, 0, 0},
     {0.01, -0.05, 0, 0.2, 0, 0, 0, 0.2, -0.01, 0.05, 0, 0.05, -0.01, 0.06, 0, 0}};
 
+/* A record that never touches the box: the sphere, from push 0's start, backs away. */
+static void record_away(const nds_model *nm, mjData *d, int control, nd_rollout *r) {
+  static const double away[16] = {-0.12, 0, -0.1, 0, -0.16, 0.02, -0.1, 0,
+                                  -0.2, 0.02, 0, 0, -0.2, 0.02, 0, 0};
+  record_push(nm, d, 0, push_ee[0], away, 4, 0.3, 0.3, control, r);
+}
+
 static int setup(void **state) {
   (void)state;
   nds_model w;
@@ -467,10 +474,7 @@ static void test_replay_skip(void **state) {
   for (int i = 0; i < NPUSH; i++)
     record_push(&nm, d, push_yaw[i], push_ee[i], push_keys[i], 4, 0.3, 0.3, ND_CTRL_VELOCITY,
                 &rs[i]);
-  const double away[16] = {-0.12, 0, -0.1, 0, -0.16, 0.02, -0.1, 0,
-                           -0.2, 0.02, 0, 0, -0.2, 0.02, 0, 0};
-  const double ee0[2] = {-0.1, 0};
-  record_push(&nm, d, 0, ee0, away, 4, 0.3, 0.3, ND_CTRL_VELOCITY, &rs[NPUSH]);
+  record_away(&nm, d, ND_CTRL_VELOCITY, &rs[NPUSH]);
   const double thetas[4][ND_NTHETA] = {{1, 0.005, 1e-4, 1, 1, 0, 0},
                                        {0.6, 0.005, 1e-4, 1, 1, 0, 0},
                                        {1, 0.02, 1e-4, 2, 1, 0, 0},
@@ -1263,11 +1267,8 @@ static void test_fit_flat_no_contact(void **state) {
   nds_model nm;
   nds_test_build(&nm, 0.001, NULL);
   mjData *d = mj_makeData(nm.m);
-  const double ee0[2] = {-0.1, 0};
-  const double away[16] = {-0.12, 0, -0.1, 0, -0.16, 0.02, -0.1, 0,
-                           -0.2, 0.02, 0, 0, -0.2, 0.02, 0, 0};
   nd_rollout rs[2];
-  record_push(&nm, d, 0, ee0, away, 4, 0.3, 0.3, ND_CTRL_FORCE, &rs[0]);
+  record_away(&nm, d, ND_CTRL_FORCE, &rs[0]);
   mj_deleteData(d);
   rec_copy(&rs[1], &push[1]);
   nds_fit_cfg cfg;
