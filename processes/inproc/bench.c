@@ -499,7 +499,7 @@ int main(int argc, char **argv) {
           nds_rollout_out o;
           nds_rollout(&m2, d2, &ctrl, &s8, sp8, keys + 8 * i, M, Ts[i], &o);
           perr[i] = hypot(o.obj_xy[0] - truth[k][i][0], o.obj_xy[1] - truth[k][i][1]);
-          yerr[i] = 180.0 / M_PI * fabs(remainder(o.obj_yaw - truth[k][i][2], 2.0 * M_PI));
+          yerr[i] = 180.0 / ND_PI * fabs(nd_wrap_angle(o.obj_yaw - truth[k][i][2]));
         }
         pe[j][k] = nd_quantile(perr, NLAB, 0.5);
         ye[j][k] = nd_quantile(yerr, NLAB, 0.5);
