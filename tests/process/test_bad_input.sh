@@ -177,7 +177,7 @@ else
 fi
 cat "$PT_WORK/tasks.out"
 pt_check "EPISODE: the tasks run during the injections ended, at least one reached its goal" \
-  pt_lc episodes "$LOG" --min-start 3 --min-end 3 --min-success 1
+  pt_lc episodes "$(pt_events "$LOG")" --min-start 3 --min-end 3 --min-success 1
 nrec=$(grep -c 'nudge-tasks: task [0-9]* recorded:' "$PT_WORK/tasks.err")
 pt_figure tasks_recorded_during_injection "$nrec" count
 pt_check "the recorder recorded the 3 tasks run through the injections ($nrec)" test "$nrec" -eq 3

@@ -45,9 +45,7 @@ fig() { awk -v n="$1" -v f="${3:-2}" '$1 == n { print $f }' "$2"; }
 
 # --- 1. sensing on the wire ------------------------------------------------------------
 LOG1=$PT_WORK/sensing.lcmlog
-pt_spawn PT_LOGGER lcm-logger -q -f -c '^(MOCAP|ROBOT_STATE)$' "$LOG1"
-pt_wait_for 5 test -e "$LOG1" || pt_fail "lcm-logger did not start"
-sleep 0.2
+pt_logger "$LOG1" '^(MOCAP|ROBOT_STATE)$'
 "$PT_BIN/nudge-bridge" --world lab --seconds 5 2>"$PT_WORK/bridge1.err"
 rc=$?
 pt_check "nudge-bridge --world lab --seconds 5 exits 0 (got $rc)" test "$rc" -eq 0
@@ -92,8 +90,7 @@ if pt_up_wait "$RUN" 30 "$up"; then
       pt_say "nudge-$p runs without SCHED_FIFO here ($cls): not checked"
     fi
   done
-  pt_spawn PT_LOGGER lcm-logger -q -f -c '^(ROBOT_STATE|STATUS|EPISODE|TASK)$' "$LOG2"
-  pt_wait_for 5 test -e "$LOG2" || pt_fail "lcm-logger did not start"
+  pt_logger "$LOG2" '^(ROBOT_STATE|STATUS|EPISODE|TASK)$'
   # Two tasks: the first is the one the robot stops in (its eps cannot be met, so it is
   # still running when the plans below arrive), the second must run. The runner settles
   # first (at least --settle), so wait for the planner to take up a new task.
@@ -167,7 +164,7 @@ if pt_up_wait "$RUN" 30 "$up"; then
   n_stopped=$(grep -c '^task .* stopped after ' "$PT_WORK/reflex-tasks.out")
   pt_check "the runner counted every stop ($n_stopped task lines)" \
     grep -q "^reflex_stops $n_stopped count" "$PT_WORK/reflex-tasks.out"
-  pt_check "EPISODE: both tasks started and ended" pt_lc episodes "$LOG2" --min-start 2 --min-end 2
+  pt_check "EPISODE: both tasks started and ended" pt_lc episodes "$(pt_events "$LOG2")" --min-start 2 --min-end 2
   pt_lc robot-state "$LOG2" >"$PT_WORK/rs2"
   cat "$PT_WORK/rs2"
   v=$(fig robot_stops "$PT_WORK/rs2")

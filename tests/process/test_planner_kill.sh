@@ -110,8 +110,8 @@ else
   fi
 fi
 pt_check "EPISODE: the task reached its goal" \
-  pt_lc episodes "$LOG" --min-start 1 --min-success 1
-pt_val t_end episodes "$LOG" episode_1_end_utime
+  pt_lc episodes "$(pt_events "$LOG")" --min-start 1 --min-success 1
+pt_val t_end episodes "$(pt_events "$LOG")" episode_1_end_utime
 pt_figure success_after_kill $(((${t_end:-0} - t_kill) / 1000)) ms
 pt_check "the task ended after the kill (it was not over before it)" test "${t_end:-0}" -gt "$t_kill"
 pt_check "supervisor: the planner died of SIGKILL" \

@@ -86,12 +86,7 @@ for ((i = 0; i < 200; i++)); do
   printf '0.15 0 0\n0.25 0.10 0.4\n0.25 0.25 0.8\n0.10 0.30 0.8\n0 0.20 0.3\n'
 done >"$PT_WORK/goals.txt"
 
-pt_logger_all() {
-  pt_spawn PT_LOGGER lcm-logger -q -f "$1"
-  pt_wait_for 5 test -e "$1" || pt_fail "lcm-logger did not start"
-  sleep 0.2
-}
-pt_logger_all "$LOG"
+pt_logger "$LOG" '.*'
 pt_spawn up "$PT_BIN/nudge-up" run --log-dir "$RUN" --buffer "$BUF" \
   --executor-arg --timeout --executor-arg "$TIMEOUT_S" \
   --executor-arg --plan-timeout --executor-arg "$TIMEOUT_S" 2>"$PT_WORK/up.err"
@@ -327,9 +322,9 @@ pt_check "the crash-loop backoff never applied to a process killed after running
   bash -c "! grep -q 'crash loop' '$RUN/supervisor.log'"
 
 # --- figures ---------------------------------------------------------------------------
-pt_lc episodes "$LOG" >/dev/null
-pt_val reached episodes "$LOG" episodes_success
-pt_val started episodes "$LOG" episodes_start
+pt_lc episodes "$(pt_events "$LOG")" >/dev/null
+pt_val reached episodes "$(pt_events "$LOG")" episodes_success
+pt_val started episodes "$(pt_events "$LOG")" episodes_start
 pt_figure faults_injected "$n_faults" count
 pt_figure kills "$n_kills" count
 pt_figure stops "$n_stops" count

@@ -46,7 +46,7 @@ cat "$PT_WORK/demo.out"
 
 pt_check "the task runner printed its summary" grep -q '^reached [0-9]*/2 goals' "$PT_WORK/demo.out"
 pt_check "EPISODE: both tasks started and ended, at least one reached its goal" \
-  pt_lc episodes "$LOG" --min-start 2 --min-end 2 --min-success 1
+  pt_lc episodes "$(pt_events "$LOG")" --min-start 2 --min-end 2 --min-success 1
 pt_check "EE_CMD: loop alive (no gap over 0.5 s), steps within v_max dt, a_max dt, j_max dt (also at plan switches)" \
   pt_lc ee-cmd "$LOG" --max-gap-ms 500
 pt_val switches ee-cmd "$LOG" plan_switches

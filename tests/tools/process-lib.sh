@@ -15,6 +15,7 @@ PT_NAME=${PT_NAME:-process-test}
 PT_FAILS=0
 PT_PIDS=()          # everything started, for the EXIT trap
 PT_LOGGER=""
+PT_EVLOGGER=""
 PT_ON_CLEANUP=()    # functions called at exit after the processes stop, before PT_WORK goes
 
 pt_say() { printf '%s: %s\n' "$PT_NAME" "$*"; }
@@ -144,24 +145,35 @@ pt_wait_for() {
   done
 }
 
-# pt_logger FILE: record the channels the checks read (not the 1 kHz ROBOT_STATE nor
-# MOCAP: less load, fewer drops) until pt_stop_logger.
+# pt_logger FILE [REGEX]: record the channels the checks read (by default not the 1 kHz
+# ROBOT_STATE nor MOCAP: less load, fewer drops) into FILE until pt_stop_logger, and the
+# one-per-event channels (EPISODE, TASK, PARAMS) also into pt_events FILE.
 pt_logger() {
+  local re=${2:-'^(EE_CMD|PLAN|TASK|PARAMS|EPISODE|STATUS)$'}
   # The instrument must not lose what it measures: as root it runs above the programs
-  # under test (nice -10), whose load can starve it past its socket buffer.
+  # under test (nice -10), whose load can starve it past its socket buffer. And a stall
+  # of ~30 ms fills LCM's queue of 30 messages per subscription with 1 kHz EE_CMD, which
+  # then drops whatever comes next: a one-off EPISODE gets its own logger and queue.
   local pre=()
   ((EUID == 0)) && pre=(nice -n -10)
-  pt_spawn PT_LOGGER "${pre[@]}" lcm-logger -q -f -c '^(EE_CMD|PLAN|TASK|PARAMS|EPISODE|STATUS)$' "$1"
+  pt_spawn PT_LOGGER "${pre[@]}" lcm-logger -q -f -c "$re" "$1"
+  pt_spawn PT_EVLOGGER "${pre[@]}" lcm-logger -q -f -c '^(EPISODE|TASK|PARAMS)$' \
+    "$(pt_events "$1")"
   # lcm-logger creates the file once it has subscribed.
-  pt_wait_for 5 test -e "$1" || pt_fail "lcm-logger did not start"
+  pt_wait_for 5 test -e "$1" -a -e "$(pt_events "$1")" || pt_fail "lcm-logger did not start"
   sleep 0.2
 }
 
+# pt_events FILE: the log of FILE's one-per-event channels, for `nudge-logcheck episodes`.
+pt_events() { printf '%s\n' "${1%.lcmlog}.events.lcmlog"; }
+
 pt_stop_logger() {
-  [[ -n $PT_LOGGER ]] || return 0
-  kill -INT "$PT_LOGGER" 2>/dev/null
-  pt_wait_pid "$PT_LOGGER" 5 || { kill -KILL "$PT_LOGGER"; wait "$PT_LOGGER"; }
-  PT_LOGGER=""
+  local pid
+  for pid in $PT_LOGGER $PT_EVLOGGER; do
+    kill -INT "$pid" 2>/dev/null
+    pt_wait_pid "$pid" 5 || { kill -KILL "$pid"; wait "$pid"; }
+  done
+  PT_LOGGER="" PT_EVLOGGER=""
 }
 
 # pt_up_wait LOGDIR SECONDS PID: wait until the supervisor PID says all processes are up;
