@@ -17,7 +17,7 @@
  *       88    56  f64 std[7]: finite, >= 0; 0 for a held parameter
  *      144     8  f64 loss: L(mean) on the buffer, finite, >= 0
  *      152     8  f64 fit_time, s, finite, >= 0
- *      160     4  i32 buffer_size: rollouts the refit used, >= 1
+ *      160     4  i32 buffer_size: the buffer's rollouts up to the newest the refit used, >= 1
  *      164     4  u32 reserved (0)
  *
  * Version 1, exactly 120 bytes, holds the paper's ND_NTHETA_PAPER entries only: the same

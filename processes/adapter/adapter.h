@@ -8,13 +8,14 @@
  *   score.c   --score: one replay of the whole buffer at a given theta, no LCM
  *
  * The adapter watches the replay buffer the task runner appends to. Whenever complete
- * rollouts beyond those of the last fit are there, it refits theta on all of them
- * (sim/nds_fit.h), publishes the result on PARAMS, appends it to the parameter history
- * (core/nd_history.h) and republishes it at 1 Hz, so a planner started later gets it too.
- * A refit takes seconds, so it runs in the fit thread; the main thread does not touch the
- * rollout array while a job runs (new records wait in the file, so one refit covers
- * whatever arrived during the last one). A restarted adapter reads its history: version
- * numbering and the CEM distribution go on from its last entry. */
+ * rollouts beyond those of the last fit are there, it refits theta on all of them, or on
+ * the newest --max-rollouts, the only ones it then keeps (sim/nds_fit.h), publishes the
+ * result on PARAMS, appends it to the parameter history (core/nd_history.h) and
+ * republishes it at 1 Hz, so a planner started later gets it too. A refit takes seconds,
+ * so it runs in the fit thread; the main thread does not touch the rollout array while a
+ * job runs (new records wait in the file, so one refit covers whatever arrived during the
+ * last one). A restarted adapter reads its history: version numbering and the CEM
+ * distribution go on from its last entry. */
 #ifndef ADAPTER_H
 #define ADAPTER_H
 
@@ -48,6 +49,7 @@ typedef struct {
   double replay_skip;         /* m */
   double anchor_fit;          /* s: half-width of the anchors' fit (nds_replay_cfg.smooth) */
   double robust;              /* m^2: CEM ranks by the robust score; 0: by L (nds_fit.h) */
+  int max_rollouts;           /* refits use the newest this many rollouts; 0: all */
   double score[ND_NTHETA];    /* --score: theta to evaluate; NAN: watch and refit */
 } adapter_opts;
 
@@ -88,13 +90,14 @@ typedef struct {
   int64_t stop_offset;        /* where the valid records stop, as last reported; -1 none */
   int64_t torn_offset;        /* torn tail seen here since torn_t; -1 none */
   double torn_t;
-  nd_rollout *rs;             /* good records, file order */
+  nd_rollout *rs;             /* good records, file order: the newest max_rollouts */
   int n, cap;
+  int total;                  /* good records read from this buffer, dropped ones too */
   int64_t bad_logged;
 
   /* fits */
-  int covered;                /* records the latest fit (or the history's) used; 0 none */
-  int failed_n;               /* a fit of this many records failed: wait for more */
+  int covered;                /* total when the latest fit (or the history's) ran; 0 none */
+  int failed_n;               /* a fit at this total failed: wait for more */
   int64_t version;            /* latest version; 0: none yet */
   int have_latest;
   nd_history_entry latest;

@@ -28,10 +28,15 @@ static void step(adapter *a, adapter_fitter *ft, const nd_history_summary *hs, i
   if (!a->rd_open) {
     *checked = 0;
     a->st.state = "waiting";
-  } else if (a->n > a->covered && a->n != a->failed_n) {
+  } else if (a->total > a->covered && a->total != a->failed_n) {
     adapter_fitter_submit(ft, a->rs, a->n);
     a->st.state = "fitting";
-    fprintf(stderr, PROG ": refitting on %d rollout(s) (%d new)\n", a->n, a->n - a->covered);
+    if (a->n < a->total)
+      fprintf(stderr, PROG ": refitting on the newest %d of %d rollout(s) (%d new)\n", a->n,
+              a->total, a->total - a->covered);
+    else
+      fprintf(stderr, PROG ": refitting on %d rollout(s) (%d new)\n", a->n,
+              a->total - a->covered);
   } else if (strcmp(a->st.state, "error")) {
     a->st.state = "idle";
   }

@@ -102,6 +102,10 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
       {"robust", ND_OPT_DOUBLE, &o->robust, 0, 1, .arg = "S",
        .help = "rank candidates by the replay windows' robust score of scale S m^2 (0: by L, "
                "the paper's)"},
+      {"max-rollouts", ND_OPT_INT, &o->max_rollouts, 0, 1000000, .arg = "K",
+       .help = "refit on the buffer's newest K rollouts and keep only those in memory, so "
+               "that a refit's time and the adapter's memory stay bounded on a buffer a robot "
+               "adds to for days (0: all of them, the paper's)"},
       {"score", ND_OPT_THETA, o->score, .def = "off",
        .help = "do not watch: replay every rollout of the buffer once at this theta with the "
                "replay options above, print its loss L and L's terms summed over the rollouts "
@@ -123,9 +127,10 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
   nd_opt_spec spec = {PROG, "--buffer FILE [options]",
                       "Incremental adaptation: watches the replay buffer FILE (appended to by "
                       "nudge-tasks --record); whenever it holds rollouts the last fit did not "
-                      "use, refits theta with CEM on all of them (Q 32, C 2, elite fraction "
-                      "0.2, unless --pop, --iters), publishes PARAMS (mean, std, loss, buffer "
-                      "size, version) and appends the fit to the parameter history. PARAMS is republished at 1 Hz. "
+                      "use, refits theta with CEM on all of them (or the newest "
+                      "--max-rollouts; Q 32, C 2, elite fraction 0.2, unless --pop, --iters), "
+                      "publishes PARAMS (mean, std, loss, buffer size, version) and appends "
+                      "the fit to the parameter history. PARAMS is republished at 1 Hz. "
                       "A restarted adapter goes on from its history: version numbers and the "
                       "CEM distribution continue.",
                       "stdout: one line per refit (--score: its figures). Exit status: 0 after "

@@ -37,7 +37,7 @@ void adapter_collect(adapter *a, adapter_fitter *ft) {
   if (rc) {
     fprintf(stderr, PROG ": refit on %d rollout(s) failed after %.2f s: %s; waiting for more\n",
             n, secs, err);
-    a->failed_n = n;
+    a->failed_n = a->total;
     a->st.state = "error";
     return;
   }
@@ -51,7 +51,7 @@ void adapter_collect(adapter *a, adapter_fitter *ft) {
   memcpy(e.std, out.std, sizeof(e.std));
   e.loss = out.loss_mean;
   e.fit_time = secs;
-  e.buffer_size = n;
+  e.buffer_size = a->total;  /* nothing is read while a fit runs: the total it covers */
   unsigned char buf[ND_HISTORY_ENC_SIZE];
   char herr[400];
   if (nd_history_encode(&e, buf, herr, sizeof(herr)) ||
@@ -64,14 +64,16 @@ void adapter_collect(adapter *a, adapter_fitter *ft) {
   a->version = e.version;
   a->latest = e;
   a->have_latest = 1;
-  a->covered = n;
+  a->covered = a->total;
   a->failed_n = 0;
   a->st.state = "idle";
   char mean[200], std[200];
   nd_theta_str(e.mean, " ", mean, sizeof(mean));
   nd_theta_str(e.std, " ", std, sizeof(std));
-  printf("refit version %lld: %d rollout(s) in %.2f s, loss %.4g%s%s%s, theta %s, std %s\n",
-         (long long)e.version, n, secs, e.loss,
+  char of[48] = "";
+  if (n < a->total) snprintf(of, sizeof(of), " (the newest of %d)", a->total);
+  printf("refit version %lld: %d rollout(s)%s in %.2f s, loss %.4g%s%s%s, theta %s, std %s\n",
+         (long long)e.version, n, of, secs, e.loss,
          out.diverged_mean ? " (mean diverged on some)" : "",
          out.flat ? " (flat: the rollouts do not tell the candidates apart; theta kept)" : "",
          out.scan_moved ? " (moved by the scan)" : "", mean, std);
@@ -140,6 +142,8 @@ void adapter_banner(const adapter *a, const nds_fit *fit, const nds_fit_cfg *fc,
   double m0[ND_NTHETA], s0[ND_NTHETA];
   nds_fit_dist(fit, m0, s0);
   char fitted[80], rank[64] = "L", scanned[80] = "none", ref[200], mean[200], std[200];
+  char window[32] = "all";
+  if (o->max_rollouts > 0) snprintf(window, sizeof(window), "the newest %d", o->max_rollouts);
   nd_theta_str(o->ref, ", ", ref, sizeof(ref));
   nd_theta_str(m0, ", ", mean, sizeof(mean));
   nd_theta_str(s0, ", ", std, sizeof(std));
@@ -150,15 +154,15 @@ void adapter_banner(const adapter *a, const nds_fit *fit, const nds_fit_cfg *fc,
           PROG ": buffer %s, history %s (%lld entries%s), fit %s, CEM Q %d C %d rho %.2g, "
           "prior D %g on (%s), %s (%s) std (%s), replay %s dt %g s window %g s x %d phase(s) "
           "skip clear %g m, scan %s (%d points), ranked by %s, "
-          "LM %d iterations, %d worker(s), nice %d, %s\n",
+          "LM %d iterations, fitting on %s rollouts, %d worker(s), nice %d, %s\n",
           o->buffer, o->history, (long long)hs->entries, hs->have_last ? ", resuming" : "",
           fitted, fc->pop, fc->iters, fc->elite_frac, o->D, ref,
           hs->have_last ? "from version" : "prior", mean, std,
           nds_replay_mode_name(fc->replay.mode), o->replay_dt,
           fc->replay.window, fc->phases, fc->replay.skip_clear, scanned, o->scan_points, rank,
-          fc->lm_iters, o->threads, o->nice, ndp_url(o->url));
+          fc->lm_iters, window, o->threads, o->nice, ndp_url(o->url));
   if (hs->have_last)
-    fprintf(stderr, PROG ": resuming after version %lld (fit on %d rollout(s) of the buffer "
+    fprintf(stderr, PROG ": resuming after version %lld (fit up to rollout %d of the buffer "
             "created %lld us)\n", (long long)hs->last.version, (int)hs->last.buffer_size,
             (long long)hs->last.buffer_created);
 }

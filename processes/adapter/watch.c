@@ -21,7 +21,7 @@ static void say_bad_record(adapter *a, const char *why) {
 
 static void drop_records(adapter *a) {
   for (int i = 0; i < a->n; i++) nd_rollout_free(&a->rs[i]);
-  a->n = 0;
+  a->n = a->total = 0;
 }
 
 static void close_buffer(adapter *a) {
@@ -93,6 +93,12 @@ static void keep_record(adapter *a, nd_rollout *r, int64_t offset) {
     nd_rollout_free(r);
     return;
   }
+  /* Past the window the oldest goes: a refit's time and the memory stay bounded. */
+  if (a->o->max_rollouts > 0 && a->n == a->o->max_rollouts) {
+    nd_rollout_free(&a->rs[0]);
+    memmove(a->rs, a->rs + 1, sizeof(*a->rs) * (size_t)(a->n - 1));
+    a->n--;
+  }
   if (a->n == a->cap) {
     int cap = a->cap ? 2 * a->cap : 16;
     nd_rollout *g = realloc(a->rs, sizeof(*g) * cap);
@@ -105,6 +111,7 @@ static void keep_record(adapter *a, nd_rollout *r, int64_t offset) {
     a->cap = cap;
   }
   a->rs[a->n++] = *r;
+  a->total++;
 }
 
 /* Read what was appended since the last poll. Only while no fit holds the array. */

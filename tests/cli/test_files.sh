@@ -11,7 +11,8 @@
 # 2. nudge-adapter on a replay buffer that is missing (it waits), not a record file or of
 #    a newer format version (it says so once and keeps polling), damaged in the middle or
 #    torn at the end (it fits the records before the damage and says where they stop);
-#    a reader never changes the file.
+#    a reader never changes the file. With --max-rollouts it fits the newest only, and
+#    a restart does not refit the records its history covers.
 # 3. nudge-adapter's history of the wrong kind, not a record file, or damaged before valid
 #    entries: exit 1 naming the file, file untouched; a torn tail: cut off, reported, the
 #    adapter resumes from the entries before it.
@@ -119,6 +120,25 @@ pt_check "the adapter fitted a good buffer and stopped with 0 on SIGINT (got $PT
 HIST1=$W/b3.nbuf.history
 pt_check "it created its history $HIST1" test -s "$HIST1"
 cp "$HIST1" "$W/h1.keep"
+
+# --max-rollouts 2: each refit uses the newest two, the history covers every record read,
+# and a restarted adapter does not refit what that covers.
+cp "$BUF3" "$W/win.nbuf"
+adapter win --buffer "$W/win.nbuf" --max-rollouts 2
+said "$W/win.out" "refit version 1: 2 rollout(s) (the newest of 3)" 60 ||
+  pt_fail "--max-rollouts 2: no fit on the newest 2 of 3 within 60 s"
+mapfile -t VOFF < <(record_offsets "$VAL")
+tail -c +$((VOFF[0] + 1)) "$VAL" | head -c $((VOFF[1] - VOFF[0])) >>"$W/win.nbuf"
+said "$W/win.out" "refit version 2: 2 rollout(s) (the newest of 4)" 60 ||
+  pt_fail "--max-rollouts 2: no fit on the newest 2 of 4 within 60 s of a fourth record"
+stop_adapter
+adapter win2 --buffer "$W/win.nbuf" --max-rollouts 2
+said "$W/win2.err" "resuming after version 2 (fit up to rollout 4 " 20 ||
+  pt_fail "--max-rollouts 2: the restart did not resume after version 2 covering 4"
+sleep 1.5
+pt_check "--max-rollouts 2: the restart refits nothing covered ($(grep -c . "$W/win2.out") lines)" \
+  test ! -s "$W/win2.out"
+stop_adapter
 
 # The buffer replaced under the adapter (a new run's file moved into place): it drops the
 # old rollouts and fits the new file's.
