@@ -14,6 +14,7 @@
 #include <string.h>
 
 #include "nd_cem.h"
+#include "nd_math.h"
 #include "nd_opt.h"
 #include "nd_rfile.h"
 #include "nd_rng.h"
@@ -101,7 +102,7 @@ static int pred_error(const nds_scene_cfg *c, const nds_ctrl_cfg *ctrl, const pu
       pe[i] = ye[i] = INFINITY;
     } else {
       pe[i] = hypot(o.obj_xy[0] - p[i].truth.obj_xy[0], o.obj_xy[1] - p[i].truth.obj_xy[1]);
-      ye[i] = fabs(remainder(o.obj_yaw - p[i].truth.obj_yaw, 2.0 * M_PI));
+      ye[i] = fabs(nd_wrap_angle(o.obj_yaw - p[i].truth.obj_yaw));
     }
     e->score += (fmin(pe[i], 0.05) + 0.03 * fmin(ye[i], 0.5)) / n;
   }
