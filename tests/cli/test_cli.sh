@@ -429,7 +429,7 @@ pt_check "nudge-up demo --world lab with stand-ins exits 0 (got $rc)" test "$rc"
 LAB=-0.15,-0.30,0.15,0.40
 args_are nudge-bridge --workspace "$LAB" --world lab
 args_are nudge-executor --workspace "$LAB" --v-max 0.65 --a-max 2.8 --brake-a-max 2.0
-args_are nudge-planner --workspace "$LAB" --v-max 0.6 --a-max 2.5 --segment-time 0.6 --arrival 0.6 --prox-way round --arm panda --arm-load 0.9 --pop 16
+args_are nudge-planner --workspace "$LAB" --v-max 0.6 --a-max 2.5 --segment-time 0.6 --arrival 0.8 --prox-way round --arm panda --arm-load 0.9 --pop 16
 args_are nudge-tasks --record "$W/lab.nrb" --world lab --eps 1e-3 --record-control velocity
 args_are nudge-adapter --replay-mode velocity --fit slide,torsion,mass,com_x,com_y --replay-window 0.6 --buffer "$W/lab.nrb"
 rm -f "$W"/*.args
