@@ -116,6 +116,8 @@ int adapter_score(const adapter_opts *o, const nds_fit_cfg *fc);
 /* watch.c */
 void adapter_poll(adapter *a);            /* read what was appended (no fit running) */
 void adapter_close(adapter *a);           /* close the buffer, drop its records */
+/* " (the newest of TOTAL)" into buf when --max-rollouts left records out of the fit, else "". */
+const char *adapter_window_note(const adapter *a, char *buf, int len);
 
 /* fitter.c */
 int adapter_fitter_start(adapter_fitter *ft, char *err, int errlen);

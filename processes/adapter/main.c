@@ -31,12 +31,9 @@ static void step(adapter *a, adapter_fitter *ft, const nd_history_summary *hs, i
   } else if (a->total > a->covered && a->total != a->failed_n) {
     adapter_fitter_submit(ft, a->rs, a->n);
     a->st.state = "fitting";
-    if (a->n < a->total)
-      fprintf(stderr, PROG ": refitting on the newest %d of %d rollout(s) (%d new)\n", a->n,
-              a->total, a->total - a->covered);
-    else
-      fprintf(stderr, PROG ": refitting on %d rollout(s) (%d new)\n", a->n,
-              a->total - a->covered);
+    char of[48];
+    fprintf(stderr, PROG ": refitting on %d rollout(s)%s (%d new)\n", a->n,
+            adapter_window_note(a, of, sizeof(of)), a->total - a->covered);
   } else if (strcmp(a->st.state, "error")) {
     a->st.state = "idle";
   }

@@ -70,10 +70,9 @@ void adapter_collect(adapter *a, adapter_fitter *ft) {
   char mean[200], std[200];
   nd_theta_str(e.mean, " ", mean, sizeof(mean));
   nd_theta_str(e.std, " ", std, sizeof(std));
-  char of[48] = "";
-  if (n < a->total) snprintf(of, sizeof(of), " (the newest of %d)", a->total);
+  char of[48];
   printf("refit version %lld: %d rollout(s)%s in %.2f s, loss %.4g%s%s%s, theta %s, std %s\n",
-         (long long)e.version, n, of, secs, e.loss,
+         (long long)e.version, n, adapter_window_note(a, of, sizeof(of)), secs, e.loss,
          out.diverged_mean ? " (mean diverged on some)" : "",
          out.flat ? " (flat: the rollouts do not tell the candidates apart; theta kept)" : "",
          out.scan_moved ? " (moved by the scan)" : "", mean, std);

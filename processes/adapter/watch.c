@@ -169,6 +169,12 @@ void adapter_poll(adapter *a) {
 }
 
 
+const char *adapter_window_note(const adapter *a, char *buf, int len) {
+  buf[0] = '\0';
+  if (a->n < a->total) snprintf(buf, len, " (the newest of %d)", a->total);
+  return buf;
+}
+
 void adapter_close(adapter *a) {
   close_buffer(a);
   drop_records(a);

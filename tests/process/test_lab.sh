@@ -90,7 +90,7 @@ if pt_up_wait "$RUN" 30 "$up"; then
       pt_say "nudge-$p runs without SCHED_FIFO here ($cls): not checked"
     fi
   done
-  pt_logger "$LOG2" '^(ROBOT_STATE|STATUS|EPISODE|TASK)$'
+  pt_logger "$LOG2" '^(ROBOT_STATE|STATUS)$'
   # Two tasks: the first is the one the robot stops in (its eps cannot be met, so it is
   # still running when the plans below arrive), the second must run. The runner settles
   # first (at least --settle), so wait for the planner to take up a new task.
