@@ -158,10 +158,13 @@ pt_check "the planner planned the $((2 + n_tries)) training tasks at $TV m/s" \
   test "$(grep -c "started: .*speed limit $TV m/s" "$PLOG")" = $((2 + n_tries))
 fig() { awk -v n="$1" '$1 == n { print $2 }' "$PT_WORK/study.out"; }
 for f in eval_success_ep0 eval_success_ep2 eval_success_last eval_time_ratio_ep2 \
-  eval_time_ratio_last val_loss_ratio_ep2 reflex_stops runs_sliding_within5pct_ep2 \
-  torsional_err_drop_pct_last sliding_err_pct_max reflex_stops_robot; do
+  eval_time_ratio_last eval_time_ep0 eval_time_ep2 val_loss_ratio_ep2 reflex_stops \
+  runs_sliding_within5pct_ep2 torsional_err_drop_pct_last sliding_err_pct_max reflex_stops_robot; do
   pt_check "summary line $f ($(fig "$f"))" test -n "$(fig "$f")"
 done
+pt_check "eval_time_ratio_ep2 is eval_time_ep2 over eval_time_ep0 ($(fig eval_time_ep2) s, $(fig eval_time_ep0) s)" \
+  awk -v r="$(fig eval_time_ratio_ep2)" -v a="$(fig eval_time_ep2)" -v b="$(fig eval_time_ep0)" \
+  'BEGIN { exit !(b > 0 && a > 0 && r > 0 && (a / b - r) ^ 2 < 1e-5) }'
 bridge_stops=$(grep -h 'the robot stopped:' "$OUT"/run_*/logs/bridge.log | wc -l)
 pt_check "reflex_stops_robot is the bridges' stops ($(fig reflex_stops_robot), $bridge_stops logged)" \
   test "$(fig reflex_stops_robot)" = "$bridge_stops"
