@@ -110,18 +110,27 @@ if pt_up_wait "$RUN" 30 "$up"; then
     pt_fail "nudge-tasks did not finish"
   fi
   cat "$PT_WORK/reflex-tasks.out"
-  # A stop between tasks: the runner waits --settle 3 s after its first task; plans to
-  # (0.45, 0) sent then stop the arm with no task running. The runner counts and names it.
+  # drive_to_stop N RUNS: plans out to (0.45, 0), at the arm's reach, and back to (0.15, 0),
+  # 0.8 s each, until the bridge has logged more than N stops. A move out trips a joint's
+  # velocity limit by a few thousandths only, so one run may end at (0.45, 0) unstopped.
+  drive_to_stop() {
+    local i to
+    for ((i = 0; i < $2; i++)); do
+      (($(grep -c 'the robot stopped' "$RUN/bridge.log") > $1)) && return
+      to=0.45,0
+      ((i % 2)) && to=0.15,0
+      "$PT_INJ" --plan-to "$to" --repeat 40 --gap-ms 20 >/dev/null || pt_fail "nudge-inject --plan-to failed"
+    done
+  }
+  # A stop between tasks: the runner waits --settle 4 s after its first task, time for four
+  # runs, which stop the arm with no task running. The runner counts and names it.
   n_rel=$(grep -c 'released' "$RUN/planner.log")
   n_stop=$(grep -c 'the robot stopped' "$RUN/bridge.log")
   pt_spawn tasks "$PT_BIN/nudge-tasks" --world lab --goal 0.0,0.15,0 --goal 0.0,0.05,0 \
-    --tau "$(pt_slow 8)" --settle 3 >"$PT_WORK/between-tasks.out" 2>"$PT_WORK/between-tasks.err"
+    --tau "$(pt_slow 8)" --settle 4 >"$PT_WORK/between-tasks.out" 2>"$PT_WORK/between-tasks.err"
   pt_wait_for 30 eval '(( $(grep -c released "$RUN/planner.log") > n_rel ))' ||
     pt_fail "the first task did not end"
-  for ((i = 0; i < 20; i++)); do
-    (($(grep -c 'the robot stopped' "$RUN/bridge.log") > n_stop)) && break
-    "$PT_INJ" --plan-to 0.45,0 --repeat 5 --gap-ms 20 >/dev/null || pt_fail "nudge-inject --plan-to failed"
-  done
+  drive_to_stop "$n_stop" 4
   pt_wait_pid "$tasks" 60 || pt_fail "nudge-tasks did not finish the tasks around a stop"
   cat "$PT_WORK/between-tasks.out"
   pt_check "the stop between tasks is counted" \
@@ -131,16 +140,8 @@ if pt_up_wait "$RUN" 30 "$up"; then
   # A stop, then a PLACE whose pose holds the stopped sphere 1.5 cm inside the box's -x side
   # (a study's next task after a stop in a push): only a resumed arm can move the sphere
   # out; a stopped one would leave it there, and the PLACE dropped after 10 s.
-  # Plans out to (0.45, 0), at the arm's reach, and back to (0.15, 0), 0.8 s each: a move out
-  # trips a joint's velocity limit by a few thousandths only, so the arm gets several runs
-  # (the stop between tasks above has to come within the runner's --settle: one run).
   n_stop=$(grep -c 'the robot stopped' "$RUN/bridge.log")
-  for ((i = 0; i < 12; i++)); do
-    (($(grep -c 'the robot stopped' "$RUN/bridge.log") > n_stop)) && break
-    to=0.45,0
-    ((i % 2)) && to=0.15,0
-    "$PT_INJ" --plan-to "$to" --repeat 40 --gap-ms 20 >/dev/null || pt_fail "nudge-inject --plan-to failed"
-  done
+  drive_to_stop "$n_stop" 12
   pt_check "the arm stopped again, no task to come" \
     test "$(grep -c 'the robot stopped' "$RUN/bridge.log")" -gt "$n_stop"
   # Braked to rest: 0.2 s of ROBOT_STATE within 1 mm (its noise is a tenth of that).
