@@ -2,6 +2,7 @@
 #include "nd_cost.h"
 
 #include <math.h>
+#include <string.h>
 
 #include "nd_math.h"
 
@@ -82,17 +83,16 @@ static int round_blocked(const double p[2], const double q[2], const double h[2]
   return 1;
 }
 
-double nd_cost_round_way(const nd_cost_round *r, const double box[3], const double from[2],
-                         const double to[2]) {
+double nd_cost_round_next(const nd_cost_round *r, const double box[3], const double from[2],
+                          const double to[2], double next[2]) {
   enum { FROM, TO, NV = 6 };
   const double c = cos(box[2]), s = sin(box[2]), grow = r->radius + ND_COST_ROUND_MARGIN;
   const double h[2] = {r->half[0] + grow, r->half[1] + grow};
-  const double straight = nd_dist2(from, to);
   /* Vertices: the two ends and the grown box's corners, in the box's frame (p) and the
    * world's (w). They sit a hair outside it, so a way along a side is not blocked. */
   const double hair = 1.0 + 1e-6;
   double p[NV][2], w[NV][2];
-  int usable[NV];
+  int usable[NV], prev[NV];
   const double *end[2] = {from, to};
   double out = 0.0;
   for (int i = FROM; i <= TO; i++) {
@@ -100,7 +100,7 @@ double nd_cost_round_way(const nd_cost_round *r, const double box[3], const doub
     nd_rot2(c, -s, d, p[i]);
     if (i == TO && fabs(p[i][0]) < r->half[0] + r->radius &&
         fabs(p[i][1]) < r->half[1] + r->radius)
-      return straight;
+      return -1.0;
     const double in0 = h[0] - fabs(p[i][0]), in1 = h[1] - fabs(p[i][1]);
     if (in0 > 0.0 && in1 > 0.0) {
       const int ax = in0 <= in1 ? 0 : 1;
@@ -109,7 +109,16 @@ double nd_cost_round_way(const nd_cost_round *r, const double box[3], const doub
     }
     usable[i] = 1;
   }
-  if (!round_blocked(p[FROM], p[TO], h)) return straight;
+  if (!round_blocked(p[FROM], p[TO], h)) {
+    if (next && out > 0.0) {
+      nd_rot2(c, s, p[FROM], next);
+      next[0] += box[0];
+      next[1] += box[1];
+    } else if (next) {
+      memcpy(next, to, 2 * sizeof(double));
+    }
+    return nd_dist2(from, to);
+  }
   for (int k = 0; k < 4; k++) {
     p[2 + k][0] = (k & 1 ? 1.0 : -1.0) * h[0] * hair;
     p[2 + k][1] = (k & 2 ? 1.0 : -1.0) * h[1] * hair;
@@ -125,7 +134,10 @@ double nd_cost_round_way(const nd_cost_round *r, const double box[3], const doub
   /* Dijkstra on the six vertices, an edge wherever the grown box does not block it. */
   double dist[NV];
   int done[NV] = {0};
-  for (int i = 0; i < NV; i++) dist[i] = INFINITY;
+  for (int i = 0; i < NV; i++) {
+    dist[i] = INFINITY;
+    prev[i] = -1;
+  }
   dist[FROM] = 0.0;
   for (;;) {
     int u = -1;
@@ -134,10 +146,25 @@ double nd_cost_round_way(const nd_cost_round *r, const double box[3], const doub
     if (u < 0 || u == TO) break;
     done[u] = 1;
     for (int v = 0; v < NV; v++)
-      if (usable[v] && !done[v] && !round_blocked(p[u], p[v], h))
-        dist[v] = fmin(dist[v], dist[u] + nd_dist2(w[u], w[v]));
+      if (usable[v] && !done[v] && !round_blocked(p[u], p[v], h) &&
+          dist[u] + nd_dist2(w[u], w[v]) < dist[v]) {
+        dist[v] = dist[u] + nd_dist2(w[u], w[v]);
+        prev[v] = u;
+      }
   }
-  return isfinite(dist[TO]) ? dist[TO] + out : straight;
+  if (!isfinite(dist[TO])) return -1.0;
+  if (next) {
+    int v = TO;
+    while (prev[v] != FROM) v = prev[v];
+    memcpy(next, out > 0.0 ? w[FROM] : w[v], 2 * sizeof(double));
+  }
+  return dist[TO] + out;
+}
+
+double nd_cost_round_way(const nd_cost_round *r, const double box[3], const double from[2],
+                         const double to[2]) {
+  const double d = nd_cost_round_next(r, box, from, to, NULL);
+  return d < 0.0 ? nd_dist2(from, to) : d;
 }
 
 /* L_prox over the horizon, not at its end: a candidate that reaches the lead point at the

@@ -59,6 +59,12 @@ typedef struct {
 double nd_cost_round_way(const nd_cost_round *r, const double box[3], const double from[2],
                          const double to[2]);
 
+/* That way, to go along it: its length (m, straight when the line is clear) and its first
+ * point after `from` into next (out of the grown box, a corner, or `to`; NULL: none), or -1
+ * when there is none: `to` within the box grown by the radius, or no way within [lo, hi]. */
+double nd_cost_round_next(const nd_cost_round *r, const double box[3], const double from[2],
+                          const double to[2], double next[2]);
+
 /* E of a rollout without L_edge: the task term `task` (the paper's nd_task_error of the
  * final state, or nd_cost_arrival), L_prox as the mean over the rollout's n samples of the
  * object obj_at[k] = (x, y, yaw) and the sphere ee_at[k] (each from its lead point; squared

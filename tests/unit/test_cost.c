@@ -1,6 +1,8 @@
 /* test_cost: plan cost terms, their symmetry, and the terminal condition's edges. */
 #include "nd_test.h"
 
+#include <string.h>
+
 #include "nd_cost.h"
 #include "nd_math.h"
 
@@ -181,6 +183,68 @@ static void test_cuboid_symmetry(void **state) {
   }
 }
 
+/* Moves along the way round from `from` to `to` (at most 8; the way's length into *len). */
+static int round_moves(const nd_cost_round *r, const double box[3], const double from[2],
+                       const double to[2], double *len) {
+  double at[2] = {from[0], from[1]}, next[2];
+  int moves = 0;
+  *len = 0.0;
+  while (nd_dist2(at, to) > 0.0 && moves < 8) {
+    if (nd_cost_round_next(r, box, at, to, next) < 0.0) return -1;
+    *len += nd_dist2(at, next);
+    memcpy(at, next, sizeof(at));
+    moves++;
+  }
+  return moves;
+}
+
+/* Going along the way round: each next point is a corner of the grown box, then the end;
+ * the moves add up to the way's length; none where the end is in the object or out of
+ * reach. */
+static void test_round_next(void **state) {
+  (void)state;
+  const nd_cost_round w = {{0.05, 0.03}, 0.025, {-1, -1}, {1, 1}};
+  const double b0[3] = {0, 0, 0}, to[2] = {-0.15, 0}, e = 1e-5;
+  double at[2] = {0.15, 0}, next[2];
+  const double way = nd_cost_round_next(&w, b0, at, to, next);
+  assert_near(way, nd_cost_round_way(&w, b0, at, to), 1e-12);
+  double sum = 0.0;
+  int moves = 0;
+  while (nd_dist2(at, to) > 0.0 && moves < 6) {
+    assert_true(nd_cost_round_next(&w, b0, at, to, next) >= 0.0);
+    if (moves < 2) { /* (0.08, +-0.06), then (-0.08, the same side) */
+      assert_near(fabs(next[0]), 0.08, e);
+      assert_near(fabs(next[1]), 0.06, e);
+    }
+    sum += nd_dist2(at, next);
+    memcpy(at, next, sizeof(at));
+    moves++;
+  }
+  assert_int_equal(moves, 3);
+  assert_near(sum, way, e);
+  /* Clear: straight to the end. */
+  assert_near(nd_cost_round_next(&w, b0, (double[]){0.1, 0.1}, (double[]){-0.1, 0.1}, next),
+              0.2, e);
+  assert_near(next[0], -0.1, 1e-12);
+  assert_near(next[1], 0.1, 1e-12);
+  /* 5 mm inside the grown box: out through the nearest side first. */
+  assert_true(nd_cost_round_next(&w, b0, (double[]){0.075, 0}, to, next) > 0.0);
+  assert_near(next[0], 0.08, e);
+  assert_near(next[1], 0.0, e);
+  /* From 2 mm inside a side (a sphere released clear of the object, but within the way's
+   * margin) round a turned box: out, two corners, the end. */
+  const double bt[3] = {0.001, -0.002, 0.03}, from_in[2] = {0.079, 0.004};
+  double len;
+  assert_int_equal(round_moves(&w, bt, from_in, to, &len), 4);
+  assert_near(len, nd_cost_round_way(&w, bt, from_in, to), e);
+  /* An end in the object, or every corner beyond reach: none. */
+  assert_true(nd_cost_round_next(&w, b0, at, (double[]){0.02, 0}, next) < 0.0);
+  nd_cost_round r = w;
+  r.hi[1] = 0.05;
+  r.lo[1] = -0.05;
+  assert_true(nd_cost_round_next(&r, b0, (double[]){0.15, 0}, to, next) < 0.0);
+}
+
 /* The way round the box: straight where the line is clear, round the grown box's corners
  * where it is not, only by corners within reach, and out of the grown box first. */
 static void test_round_way(void **state) {
@@ -283,6 +347,7 @@ int main(void) {
       cmocka_unit_test(test_arrival),
       cmocka_unit_test(test_edge),
       cmocka_unit_test(test_round_way),
+      cmocka_unit_test(test_round_next),
       cmocka_unit_test(test_cuboid_symmetry),
       cmocka_unit_test(test_default_weights),
       cmocka_unit_test(test_terminal_condition),
