@@ -163,7 +163,12 @@ int ndp_check_place(const nudge_place_t *m, char *why, int len) {
     snprintf(why, len, "place_id = %lld is negative", (long long)m->place_id);
     return -1;
   }
-  return 0;
+  if (m->park != 0 && m->park != 1) {
+    snprintf(why, len, "park = %d is neither 0 nor 1", m->park);
+    return -1;
+  }
+  const double park[2] = {m->park_x, m->park_y};
+  return m->park && vec_ok(park, 2, NDP_MAX_POS, "park", why, len) ? -1 : 0;
 }
 
 int ndp_check_params(const nudge_params_t *m, char *why, int len) {

@@ -86,6 +86,9 @@ static void fz_valid_place(const nudge_place_t *m) {
   FZ_CHECK(m->utime > 0 && m->place_id >= 0 && fz_bounded(g, 2, NDP_MAX_POS) &&
            fz_bounded(&m->yaw, 1, 100.0) && isfinite(m->clear) && m->clear >= 0.0 &&
            m->clear <= NDP_MAX_PLACE_CLEAR, "accepted place out of bounds");
+  const double park[2] = {m->park_x, m->park_y};
+  FZ_CHECK(m->park == 0 || (m->park == 1 && fz_bounded(park, 2, NDP_MAX_POS)),
+           "accepted place park out of bounds");
 }
 
 static void fz_valid_params(const nudge_params_t *m) {

@@ -205,7 +205,8 @@ static void seed_msgs(void) {
   nudge_arm_state_t ar = {.utime = t, .seq = 3, .q = {0, -0.3, 0, -2.2, 0, 1.9, 0.8},
                           .dq = {0.1, 0, 0, 0, 0, 0, 0}, .tau = {0, 10, 0, -5, 0, 1, 0}};
   SEED_MSG(arm_state_t, ar);
-  nudge_place_t pc = {.utime = t, .place_id = 5, .x = 0.0, .y = 0.0, .yaw = 0.0, .clear = 0.01};
+  nudge_place_t pc = {.utime = t, .place_id = 5, .x = 0.0, .y = 0.0, .yaw = 0.0, .clear = 0.01,
+                      .park = 1, .park_x = -0.1, .park_y = 0.0};
   SEED_MSG(place_t, pc);
 }
 

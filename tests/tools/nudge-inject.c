@@ -359,7 +359,7 @@ static void inject_task(inj *j) {
 
 static void inject_place(inj *j) {
   /* Template: the start pose; only ever sent with one field broken. */
-  const nudge_place_t ok = {wall_us(), 1000000, 0.0, 0.0, 0.0, 0.01};
+  const nudge_place_t ok = {wall_us(), 1000000, 0.0, 0.0, 0.0, 0.01, 0, 0.0, 0.0};
   nudge_place_t m;
 #define PLACE_BAD(stmt)                                                 \
   do {                                                                  \
@@ -375,6 +375,9 @@ static void inject_place(inj *j) {
   PLACE_BAD(m.clear = 5.0);
   PLACE_BAD(m.place_id = -2);
   PLACE_BAD(m.utime = 0);
+  PLACE_BAD(m.park = 2);
+  PLACE_BAD((m.park = 1, m.park_x = NAN));
+  PLACE_BAD((m.park = 1, m.park_y = 1e6));
 #undef PLACE_BAD
   if (j->o->place_at) {
     m = ok;
