@@ -70,6 +70,8 @@ static void use_place(void *user, const nudge_place_t *m) {
   p->place = *m;
   p->place_due = p->place_pending = 1;
   p->place_at = ndp_mono();
+  p->parking = m->park;
+  p->park_legs = 0;
 }
 
 static void use_task(void *user, const nudge_task_t *m) {
@@ -85,6 +87,7 @@ static void use_task(void *user, const nudge_task_t *m) {
   p->active = 1;
   p->release_due = 0;
   p->keep_clear = 0;
+  p->parking = 0;
   p->task_t0 = ndp_mono();
   p->task_plans = 0;
   p->task_ms_sum = p->task_ms_max = p->task_stale = 0.0;

@@ -238,12 +238,54 @@ int planner_release(planner_proc *p, double now, char *err, int errlen) {
   return 0;
 }
 
+/* The park's next move, once the object is seen at the PLACE's pose: from where the last
+ * move rests the sphere (or, first, where it is) to the next point of the way round. */
+static int park_step(planner_proc *p, double now, char *err, int errlen) {
+  if (placing(p, now) || !release_sensed(p, now)) return 0;
+  const nd_release_box b = release_box(p, now);
+  const nds_planner_cfg *pc = nds_planner_config(p->planner);
+  const double grow = PLANNER_PARK_EXTRA;
+  const nd_cost_round r = {{b.half[0] + grow, b.half[1] + grow}, p->ee_radius,
+                           {pc->ws_lo[0], pc->ws_lo[1]}, {pc->ws_hi[0], pc->ws_hi[1]}};
+  if (p->park_legs == 0) {
+    p->park_box[0] = b.x;
+    p->park_box[1] = b.y;
+    p->park_box[2] = b.yaw;
+  }
+  const double *box = p->park_box, park[2] = {p->place.park_x, p->place.park_y};
+  const double *from = p->park_legs ? p->release_key : p->rs.ee_pos;
+  double key[2];
+  const double way = nd_cost_round_next(&r, box, from, park, key);
+  const int inside = park[0] >= r.lo[0] && park[0] <= r.hi[0] && park[1] >= r.lo[1] &&
+                     park[1] <= r.hi[1];
+  const char *why = !inside                   ? "it is outside the keypoint box"
+                    : way < 0.0               ? "no way round the object within the keypoint box"
+                    : p->park_legs >= PLANNER_PARK_LEGS ? "too many moves"
+                                                        : NULL;
+  if (why) {
+    p->parking = 0;
+    fprintf(stderr, PROG ": PLACE %lld: the sphere does not park at (%+.3f, %+.3f) m: %s; it "
+            "stays at (%+.3f, %+.3f) m\n", (long long)p->place.place_id, park[0], park[1], why,
+            from[0], from[1]);
+    return 0;
+  }
+  if (publish_release(p, now, &b, key, 0, err, errlen)) return -1;
+  p->park_legs++;
+  if (nd_dist2(key, park) > 0.0) return 0;
+  p->parking = 0;
+  fprintf(stderr, PROG ": PLACE %lld: the sphere parks at (%+.3f, %+.3f) m, round the object "
+          "at (%+.3f, %+.3f) m in %d move(s)\n", (long long)p->place.place_id, park[0], park[1],
+          box[0], box[1], p->park_legs);
+  return 0;
+}
+
 int planner_keep_clear(planner_proc *p, double now, char *err, int errlen) {
   if (now < p->release_until) {
     if (now - p->released_at < PLANNER_RELEASE_RENEW || !release_sensed(p, now)) return 0;
     const nd_release_box b = release_box(p, now);
     return publish_release(p, now, &b, p->release_key, 1, err, errlen);
   }
+  if (p->parking) return park_step(p, now, err, errlen);
   if (!p->keep_clear || now - p->released_at < PLANNER_RECLEAR_WAIT || !release_sensed(p, now))
     return 0;
   const nd_release_box b = release_box(p, now);

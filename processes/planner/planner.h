@@ -68,6 +68,14 @@ typedef struct {
 #define PLANNER_PLACE_EXTRA 0.003
 #define PLANNER_PLACE_AT 0.005
 
+/* A PLACE with park: once the object is seen at its pose, the sphere goes to the park
+ * point along the shortest way round it (nd_cost_round_next), one move at rest per corner,
+ * each as quick as a release. The way keeps PLANNER_PARK_EXTRA beyond nd_cost's margin:
+ * tracking lags a setpoint that turns at a corner. A way of more than PLANNER_PARK_LEGS
+ * moves is given up (the way has at most four corners and one step out of the box). */
+#define PLANNER_PARK_EXTRA 0.01
+#define PLANNER_PARK_LEGS 6
+
 /* Niceness the planning threads add to the process's: below its LCM receive thread. */
 #define PLANNER_COMPUTE_NICE 5
 
@@ -112,6 +120,10 @@ typedef struct {
   int place_due;               /* a new PLACE: send the sphere clear of its pose */
   int place_pending;           /* the object is not yet seen at its pose */
   double place_at;             /* when it came, s (ndp_mono) */
+  int parking;                 /* the PLACE's park is under way (PLANNER_PARK_*) */
+  int park_legs;               /* moves published for it */
+  double park_box[3];          /* the object's pose the way goes round, as its first move saw
+                                  it (x, y, yaw): fixed, so the way's corners stay corners */
 
   double plan_s;               /* recent plan time, s (moving average) */
   double pre_sp[PLANNER_PRE_MAX][2][4]; /* the prefix's setpoints, one per model step */
@@ -154,8 +166,9 @@ int planner_release(planner_proc *p, double now, char *err, int errlen);
 int planner_place(planner_proc *p, double now, char *err, int errlen);
 
 /* While idle after a release: re-send it until its segment ends (PLANNER_RELEASE_RENEW);
- * then, if the object has come closer to the sphere than PLANNER_RECLEAR x --release,
- * publish the release again (PLANNER_RECLEAR_*). Return 0, or -1 with a message (LCM). */
+ * then the next move of a PLACE's park (PLANNER_PARK_*); otherwise, if the object has come
+ * closer to the sphere than PLANNER_RECLEAR x --release, publish the release again
+ * (PLANNER_RECLEAR_*). Return 0, or -1 with a message (LCM). */
 int planner_keep_clear(planner_proc *p, double now, char *err, int errlen);
 
 #endif
