@@ -59,13 +59,20 @@ int main(int argc, char **argv) {
   for (int i = 0; i < cfg.n && !ndp_quit; i++) {
     tasks_result r;
     if (cfg.place) {
-      const int pl = tasks_place(lcm, &io, &cfg, err, sizeof(err));
+      const int park = cfg.park && i == 0;
+      const int pl = tasks_place(lcm, &io, &cfg, park, err, sizeof(err));
       if (pl < 0) goto done;
       if (pl == 0 && !ndp_quit) {
-        snprintf(err, sizeof(err), "--place: the object was not at (%g, %g) m, yaw %g rad "
+        char pk[160] = "";
+        if (park)
+          snprintf(pk, sizeof(pk), ", with the sphere parked within %g m of (%g, %g) m "
+                   "(nudge-planner's log says why not)", PARK_AT, cfg.park_xy[0],
+                   cfg.park_xy[1]);
+        snprintf(err, sizeof(err), "--place: the object was not at (%g, %g) m, yaw %g rad%s "
                  "within %g s of asking on %s (nudge-bridge puts it there once the sphere is %g "
                  "m clear and at rest; on a robot, put it there by hand)", cfg.place_pose.x,
-                 cfg.place_pose.y, cfg.place_pose.yaw, cfg.place_wait, NDP_CH_PLACE, PLACE_CLEAR);
+                 cfg.place_pose.y, cfg.place_pose.yaw, pk, cfg.place_wait, NDP_CH_PLACE,
+                 PLACE_CLEAR);
         goto done;
       }
     } else if (tasks_settle(lcm, &io, &cfg, err, sizeof(err))) {

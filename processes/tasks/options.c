@@ -142,6 +142,10 @@ int tasks_options(int argc, char **argv, tasks_cfg *c) {
                "MOCAP shows it there (nudge-bridge puts it there once the planner has moved "
                "the sphere clear; on a robot, a person does): every task starts from the same "
                "pose, as the paper's evaluation tasks do"},
+      {"park", ND_OPT_LIST, c->park_xy, -NDP_MAX_POS, NDP_MAX_POS, 2, .arg = "X,Y", .def = "",
+       .help = "with --place: before the first task, once the object is placed, the planner "
+               "also takes the sphere round it to this point (m), and the runner waits for it "
+               "there: a set of tasks starts from one sphere pose as well as one object pose"},
       {"place-wait", ND_OPT_DOUBLE, &c->place_wait, 0.1, 3600.0, .arg = "S",
        .help = "with --place: how long to wait for the object at the pose before giving up "
                "(status 1)"},
@@ -167,6 +171,8 @@ int tasks_options(int argc, char **argv, tasks_cfg *c) {
     return nd_opt_fail(&spec, "--await-fit needs --record (it waits for the fit of a record)");
   if (nd_opt_find(&spec, "place-wait")->given && !c->place)
     return nd_opt_fail(&spec, "--place-wait needs --place");
+  c->park = nd_opt_find(&spec, "park")->given > 0;
+  if (c->park && !c->place) return nd_opt_fail(&spec, "--park needs --place");
   if (world == 1 && !nd_opt_find(&spec, "tau")->given) c->tau = 8.0;
   if (world == 1 && !nd_opt_find(&spec, "record-frames")->given)
     c->record_join = ND_REC_JOIN_LINE;

@@ -230,6 +230,8 @@ bad nudge-tasks "--await-fit needs --record" --await-fit 5
 bad nudge-tasks "--place|expected X,Y,YAW|'0,0'" --place 0,0
 bad nudge-tasks "--place|'0,nan,0'|y: 'nan' is not a finite number" --place 0,nan,0
 bad nudge-tasks "--place-wait needs --place" --place-wait 5
+bad nudge-tasks "--park needs --place" --park -0.1,0
+bad nudge-tasks "--park|expected 2 comma-separated numbers|'-0.1'" --place 0,0,0 --park -0.1
 
 bad nudge-status "--pid needs --wait NAME" --pid 5
 
