@@ -95,6 +95,7 @@ double nd_cost_round_next(const nd_cost_round *r, const double box[3], const dou
   int usable[NV], prev[NV];
   const double *end[2] = {from, to};
   double out = 0.0;
+  int from_out = 0; /* `from` within the grown box: the way's first point is out of it */
   for (int i = FROM; i <= TO; i++) {
     const double d[2] = {end[i][0] - box[0], end[i][1] - box[1]};
     nd_rot2(c, -s, d, p[i]);
@@ -106,11 +107,12 @@ double nd_cost_round_next(const nd_cost_round *r, const double box[3], const dou
       const int ax = in0 <= in1 ? 0 : 1;
       out += ax == 0 ? in0 : in1;
       p[i][ax] = copysign(h[ax] * hair, p[i][ax]);
+      from_out |= i == FROM;
     }
     usable[i] = 1;
   }
   if (!round_blocked(p[FROM], p[TO], h)) {
-    if (next && out > 0.0) {
+    if (next && from_out) {
       nd_rot2(c, s, p[FROM], next);
       next[0] += box[0];
       next[1] += box[1];
@@ -156,7 +158,7 @@ double nd_cost_round_next(const nd_cost_round *r, const double box[3], const dou
   if (next) {
     int v = TO;
     while (prev[v] != FROM) v = prev[v];
-    memcpy(next, out > 0.0 ? w[FROM] : w[v], 2 * sizeof(double));
+    memcpy(next, from_out ? w[FROM] : w[v], 2 * sizeof(double));
   }
   return dist[TO] + out;
 }

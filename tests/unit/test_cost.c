@@ -237,6 +237,13 @@ static void test_round_next(void **state) {
   double len;
   assert_int_equal(round_moves(&w, bt, from_in, to, &len), 4);
   assert_near(len, nd_cost_round_way(&w, bt, from_in, to), e);
+  /* An end within the grown box but clear of the sphere's reach into the object: round the
+   * two corners, then in along the side (this end once sent the way back out of the box). */
+  const double near_end[2] = {-0.078, 0.0};
+  assert_int_equal(round_moves(&w, b0, (double[]){0.15, 0}, near_end, &len), 3);
+  /* The way's length counts the step in along the side; the last move takes it diagonally. */
+  const double near_way = nd_cost_round_way(&w, b0, (double[]){0.15, 0}, near_end);
+  assert_true(len <= near_way && len > near_way - 0.002);
   /* An end in the object, or every corner beyond reach: none. */
   assert_true(nd_cost_round_next(&w, b0, at, (double[]){0.02, 0}, next) < 0.0);
   nd_cost_round r = w;
