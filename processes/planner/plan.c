@@ -238,44 +238,53 @@ int planner_release(planner_proc *p, double now, char *err, int errlen) {
   return 0;
 }
 
-/* The park's next move, once the object is seen at the PLACE's pose: from where the last
- * move rests the sphere (or, first, where it is) to the next point of the way round. */
+/* The way round the object to the park point, from the sphere: p->park_way. Return NULL,
+ * or why there is none. */
+static const char *park_plan(planner_proc *p, const nd_release_box *b) {
+  const nds_planner_cfg *pc = nds_planner_config(p->planner);
+  const double grow = PLANNER_PARK_EXTRA;
+  const nd_cost_round r = {{b->half[0] + grow, b->half[1] + grow}, p->ee_radius,
+                           {pc->ws_lo[0], pc->ws_lo[1]}, {pc->ws_hi[0], pc->ws_hi[1]}};
+  const double box[3] = {b->x, b->y, b->yaw}, park[2] = {p->place.park_x, p->place.park_y};
+  if (park[0] < r.lo[0] || park[0] > r.hi[0] || park[1] < r.lo[1] || park[1] > r.hi[1])
+    return "it is outside the keypoint box";
+  const double *at = p->rs.ee_pos;
+  for (p->park_n = 0; p->park_n < PLANNER_PARK_LEGS; p->park_n++) {
+    double *next = p->park_way[p->park_n];
+    if (nd_cost_round_next(&r, box, at, park, next) < 0.0)
+      return "no way round the object within the keypoint box";
+    at = next;
+    if (nd_dist2(at, park) == 0.0) {
+      p->park_n++;
+      return NULL;
+    }
+  }
+  return "the way has too many corners";
+}
+
+/* The park's next move, once the object is seen at the PLACE's pose and the last move has
+ * ended: the way is found at the first. */
 static int park_step(planner_proc *p, double now, char *err, int errlen) {
   if (placing(p, now) || !release_sensed(p, now)) return 0;
   const nd_release_box b = release_box(p, now);
-  const nds_planner_cfg *pc = nds_planner_config(p->planner);
-  const double grow = PLANNER_PARK_EXTRA;
-  const nd_cost_round r = {{b.half[0] + grow, b.half[1] + grow}, p->ee_radius,
-                           {pc->ws_lo[0], pc->ws_lo[1]}, {pc->ws_hi[0], pc->ws_hi[1]}};
-  if (p->park_legs == 0) {
-    p->park_box[0] = b.x;
-    p->park_box[1] = b.y;
-    p->park_box[2] = b.yaw;
+  if (p->park_next == 0) {
+    const char *why = park_plan(p, &b);
+    if (why) {
+      p->parking = 0;
+      fprintf(stderr, PROG ": PLACE %lld: the sphere does not park at (%+.3f, %+.3f) m: %s\n",
+              (long long)p->place.place_id, p->place.park_x, p->place.park_y, why);
+      return 0;
+    }
+    char way[PLANNER_PARK_LEGS * 20] = "";
+    for (int k = 0, n = 0; k < p->park_n; k++)
+      n += snprintf(way + n, sizeof(way) - (size_t)n, " (%+.3f, %+.3f)", p->park_way[k][0],
+                    p->park_way[k][1]);
+    fprintf(stderr, PROG ": PLACE %lld: the sphere parks at (%+.3f, %+.3f) m, round the object "
+            "at (%+.3f, %+.3f) m in %d move(s):%s\n", (long long)p->place.place_id,
+            p->place.park_x, p->place.park_y, b.x, b.y, p->park_n, way);
   }
-  const double *box = p->park_box, park[2] = {p->place.park_x, p->place.park_y};
-  const double *from = p->park_legs ? p->release_key : p->rs.ee_pos;
-  double key[2];
-  const double way = nd_cost_round_next(&r, box, from, park, key);
-  const int inside = park[0] >= r.lo[0] && park[0] <= r.hi[0] && park[1] >= r.lo[1] &&
-                     park[1] <= r.hi[1];
-  const char *why = !inside                   ? "it is outside the keypoint box"
-                    : way < 0.0               ? "no way round the object within the keypoint box"
-                    : p->park_legs >= PLANNER_PARK_LEGS ? "too many moves"
-                                                        : NULL;
-  if (why) {
-    p->parking = 0;
-    fprintf(stderr, PROG ": PLACE %lld: the sphere does not park at (%+.3f, %+.3f) m: %s; it "
-            "stays at (%+.3f, %+.3f) m\n", (long long)p->place.place_id, park[0], park[1], why,
-            from[0], from[1]);
-    return 0;
-  }
-  if (publish_release(p, now, &b, key, 0, err, errlen)) return -1;
-  p->park_legs++;
-  if (nd_dist2(key, park) > 0.0) return 0;
-  p->parking = 0;
-  fprintf(stderr, PROG ": PLACE %lld: the sphere parks at (%+.3f, %+.3f) m, round the object "
-          "at (%+.3f, %+.3f) m in %d move(s)\n", (long long)p->place.place_id, park[0], park[1],
-          box[0], box[1], p->park_legs);
+  if (publish_release(p, now, &b, p->park_way[p->park_next], 0, err, errlen)) return -1;
+  p->parking = ++p->park_next < p->park_n;
   return 0;
 }
 

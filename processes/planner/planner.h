@@ -69,10 +69,11 @@ typedef struct {
 #define PLANNER_PLACE_AT 0.005
 
 /* A PLACE with park: once the object is seen at its pose, the sphere goes to the park
- * point along the shortest way round it (nd_cost_round_next), one move at rest per corner,
- * each as quick as a release. The way keeps PLANNER_PARK_EXTRA beyond nd_cost's margin:
- * tracking lags a setpoint that turns at a corner. A way of more than PLANNER_PARK_LEGS
- * moves is given up (the way has at most four corners and one step out of the box). */
+ * point along the shortest way round it (nd_cost_round_next), found once from that pose
+ * and one move at rest per point, each as quick as a release. The way keeps
+ * PLANNER_PARK_EXTRA beyond nd_cost's margin: tracking lags a setpoint that turns at a
+ * corner. A way of more than PLANNER_PARK_LEGS points is given up (it has at most a step out
+ * of the grown box, three corners and the park point). */
 #define PLANNER_PARK_EXTRA 0.01
 #define PLANNER_PARK_LEGS 6
 
@@ -121,9 +122,8 @@ typedef struct {
   int place_pending;           /* the object is not yet seen at its pose */
   double place_at;             /* when it came, s (ndp_mono) */
   int parking;                 /* the PLACE's park is under way (PLANNER_PARK_*) */
-  int park_legs;               /* moves published for it */
-  double park_box[3];          /* the object's pose the way goes round, as its first move saw
-                                  it (x, y, yaw): fixed, so the way's corners stay corners */
+  int park_n, park_next;       /* the way's points, and the next one to move to */
+  double park_way[PLANNER_PARK_LEGS][2];
 
   double plan_s;               /* recent plan time, s (moving average) */
   double pre_sp[PLANNER_PRE_MAX][2][4]; /* the prefix's setpoints, one per model step */
