@@ -156,9 +156,12 @@ double nd_cost_round_next(const nd_cost_round *r, const double box[3], const dou
   }
   if (!isfinite(dist[TO])) return -1.0;
   if (next) {
-    int v = TO;
-    while (prev[v] != FROM) v = prev[v];
-    memcpy(next, from_out ? w[FROM] : w[v], 2 * sizeof(double));
+    /* The way's first point that is not where it starts: a start on a corner (the point
+     * the last move went to) reaches that corner first, a hop of length 0. */
+    int first = TO;
+    for (int v = TO; v != FROM; v = prev[v])
+      if (nd_dist2(w[v], w[FROM]) > 1e-9) first = v;
+    memcpy(next, from_out ? w[FROM] : w[first], 2 * sizeof(double));
   }
   return dist[TO] + out;
 }

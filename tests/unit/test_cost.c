@@ -5,6 +5,7 @@
 
 #include "nd_cost.h"
 #include "nd_math.h"
+#include "nd_rng.h"
 
 static void test_known_values(void **state) {
   (void)state;
@@ -252,6 +253,46 @@ static void test_round_next(void **state) {
   assert_true(nd_cost_round_next(&r, b0, (double[]){0.15, 0}, to, next) < 0.0);
 }
 
+/* 1 if p lies in the box b (x, y, yaw) of half sides hx, hy. */
+static int in_box(const double b[3], const double p[2], double hx, double hy) {
+  const double c = cos(b[2]), s = sin(b[2]), d[2] = {p[0] - b[0], p[1] - b[1]};
+  return fabs(c * d[0] + s * d[1]) < hx && fabs(-s * d[0] + c * d[1]) < hy;
+}
+
+/* Random boxes, starts and ends (the lab's keypoint box): every way found ends within 6
+ * moves, each clear of the object grown by the radius. A start on a corner, the point the
+ * last move went to, once made the way's first point that corner again. */
+static void test_round_next_random(void **state) {
+  (void)state;
+  const nd_cost_round r = {{0.06, 0.04}, 0.025, {-0.15, -0.3}, {0.15, 0.4}};
+  nd_rng g;
+  nd_rng_seed(&g, 7, 0);
+  int ways = 0;
+  for (int t = 0; t < 20000; t++) {
+    const double box[3] = {0.2 * nd_rng_uniform(&g) - 0.1, 0.2 * nd_rng_uniform(&g) - 0.1,
+                           6.4 * nd_rng_uniform(&g) - 3.2};
+    double at[2] = {0.3 * nd_rng_uniform(&g) - 0.15, 0.7 * nd_rng_uniform(&g) - 0.3};
+    const double to[2] = {0.3 * nd_rng_uniform(&g) - 0.15, 0.7 * nd_rng_uniform(&g) - 0.3};
+    if (in_box(box, at, 0.085, 0.065) || in_box(box, to, 0.085, 0.065)) continue;
+    int moves = 0;
+    double next[2];
+    while (moves < 6 && nd_cost_round_next(&r, box, at, to, next) >= 0.0) {
+      for (int q = 1; q < 20; q++) {
+        const double m[2] = {at[0] + (next[0] - at[0]) * q / 20.0,
+                             at[1] + (next[1] - at[1]) * q / 20.0};
+        assert_false(in_box(box, m, 0.075, 0.055));
+      }
+      memcpy(at, next, sizeof(at));
+      moves++;
+      if (nd_dist2(at, to) == 0.0) break;
+    }
+    if (moves == 0) continue; /* no way within the keypoint box */
+    assert_true(nd_dist2(at, to) == 0.0);
+    ways++;
+  }
+  assert_true(ways > 10000);
+}
+
 /* The way round the box: straight where the line is clear, round the grown box's corners
  * where it is not, only by corners within reach, and out of the grown box first. */
 static void test_round_way(void **state) {
@@ -355,6 +396,7 @@ int main(void) {
       cmocka_unit_test(test_edge),
       cmocka_unit_test(test_round_way),
       cmocka_unit_test(test_round_next),
+      cmocka_unit_test(test_round_next_random),
       cmocka_unit_test(test_cuboid_symmetry),
       cmocka_unit_test(test_default_weights),
       cmocka_unit_test(test_terminal_condition),
