@@ -276,7 +276,7 @@ static int park_step(planner_proc *p, double now, char *err, int errlen) {
       return 0;
     }
     char way[PLANNER_PARK_LEGS * 20] = "";
-    for (int k = 0, n = 0; k < p->park_n; k++)
+    for (int k = 0, n = 0; k < p->park_n && n < (int)sizeof(way); k++)
       n += snprintf(way + n, sizeof(way) - (size_t)n, " (%+.3f, %+.3f)", p->park_way[k][0],
                     p->park_way[k][1]);
     fprintf(stderr, PROG ": PLACE %lld: the sphere parks at (%+.3f, %+.3f) m, round the object "

@@ -266,8 +266,8 @@ static int place_once(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, int park, ch
   io->st.state = "placing";
   const nd_goal *g = &c->place_pose;
   const int64_t now_us = ndp_utime();
-  const nudge_place_t m = {now_us,      now_us, g->x, g->y, g->yaw, PLACE_CLEAR, (int8_t)park,
-                           c->park_xy[0], c->park_xy[1]};
+  const nudge_place_t m = {now_us, now_us, g->x, g->y, g->yaw, PLACE_CLEAR,
+                           (int8_t)park, c->park_xy[0], c->park_xy[1]};
   const double t0 = ndp_mono();
   double sent = -INFINITY;
   int said = 0;
