@@ -33,6 +33,10 @@
 #    rest, unless the restarted planner's plans take over first), the supervisor restarts
 #    the planner, and the bridge logs no reflex (the stale brake keeps to 2 m/s^2, which
 #    the joints take).
+# 6. A park round the object: the sphere starts at (0.12, 0), on the far side of the start
+#    pose from the park point (-0.10, 0); nudge-tasks --place 0,0,0 --park -0.10,0 has the
+#    object put at the origin and the planner take the sphere round it, over a corner on
+#    each end, without moving it (not placed again) or tripping a reflex, before the task.
 set -u
 PT_NAME=test_lab
 . "$(dirname "${BASH_SOURCE[0]}")/../tools/process-lib.sh"
@@ -281,4 +285,23 @@ if pt_up_wait "$KILL" 30 "$up"; then
 else
   pt_fail "nudge-up run --world lab did not come up (section 5)"
 fi
+
+# --- 6. a park round the object --------------------------------------------------------
+PARK=$PT_WORK/park
+"$PT_BIN/nudge-up" demo --world lab --log-dir "$PARK" --bridge-arg --ee --bridge-arg 0.12,0 \
+  --bridge-arg --object --bridge-arg -0.05,0.15,0 -- --place 0,0,0 --park -0.10,0 \
+  --goal 0.10,0.10,0.4 --tau "$(pt_slow 1)" >"$PT_WORK/park.out" 2>"$PT_WORK/park.err"
+rc=$?
+pt_check "nudge-up demo with --park exits 0 (got $rc)" test "$rc" -eq 0
+grep 'parks at' "$PARK/planner.log"
+moves=$(sed -n -E 's/.*: the sphere parks at \(-0\.100, \+0\.000\) m, round the object at \([+-]0\.00[0-9], [+-]0\.00[0-9]\) m in ([0-9]) move.*/\1/p' \
+  "$PARK/planner.log")
+pt_figure lab_park_moves "${moves:-0}" count
+pt_check "the planner parked the sphere round the placed object (${moves:-no} moves)" \
+  test "${moves:-0}" -ge 3
+pt_check "the task ran from the park" grep -qE '^task 1/1 .*(reached|timed out)' "$PT_WORK/park.out"
+pt_check_not "the park did not move the object (not placed again)" \
+  grep -q 'placing it again' "$PT_WORK/park.err"
+pt_check_not "no reflex on the way round" grep -q 'the robot stopped' "$PARK/bridge.log"
+pt_none_left "$PARK"
 exit $((PT_FAILS > 0))
