@@ -147,12 +147,14 @@ double nd_cost_round_next(const nd_cost_round *r, const double box[3], const dou
       if (usable[i] && !done[i] && isfinite(dist[i]) && (u < 0 || dist[i] < dist[u])) u = i;
     if (u < 0 || u == TO) break;
     done[u] = 1;
-    for (int v = 0; v < NV; v++)
-      if (usable[v] && !done[v] && !round_blocked(p[u], p[v], h) &&
-          dist[u] + nd_dist2(w[u], w[v]) < dist[v]) {
-        dist[v] = dist[u] + nd_dist2(w[u], w[v]);
+    for (int v = 0; v < NV; v++) {
+      if (!usable[v] || done[v] || round_blocked(p[u], p[v], h)) continue;
+      const double d = dist[u] + nd_dist2(w[u], w[v]);
+      if (d < dist[v]) {
+        dist[v] = d;
         prev[v] = u;
       }
+    }
   }
   if (!isfinite(dist[TO])) return -1.0;
   if (next) {
