@@ -71,7 +71,7 @@ static void use_place(void *user, const nudge_place_t *m) {
   p->place_due = p->place_pending = 1;
   p->place_at = ndp_mono();
   p->parking = m->park;
-  p->park_n = p->park_next = 0;
+  p->park_n = p->park_next = p->park_tries = 0;
 }
 
 static void use_task(void *user, const nudge_task_t *m) {

@@ -263,7 +263,8 @@ static const char *park_plan(planner_proc *p, const nd_release_box *b) {
 }
 
 /* The park's next move, once the object is seen at the PLACE's pose and the last move has
- * ended: the way is found at the first. */
+ * ended: the way is found at the first; a move whose end the sphere has not reached is
+ * sent again (PLANNER_PARK_AT); the park ends with the sphere at the park point. */
 static int park_step(planner_proc *p, double now, char *err, int errlen) {
   if (placing(p, now) || !release_sensed(p, now)) return 0;
   const nd_release_box b = release_box(p, now);
@@ -283,8 +284,28 @@ static int park_step(planner_proc *p, double now, char *err, int errlen) {
             "at (%+.3f, %+.3f) m in %d move(s):%s\n", (long long)p->place.place_id,
             p->place.park_x, p->place.park_y, b.x, b.y, p->park_n, way);
   }
+  if (p->park_next > 0) {
+    const double *key = p->park_way[p->park_next - 1];
+    const double off = nd_dist2(p->rs.ee_pos, key);
+    if (off >= PLANNER_PARK_AT && p->park_tries >= PLANNER_PARK_TRIES) {
+      p->parking = 0;
+      fprintf(stderr, PROG ": PLACE %lld: the sphere does not park: it stays %.1f mm from "
+              "(%+.3f, %+.3f) m after %d moves there\n", (long long)p->place.place_id,
+              1e3 * off, key[0], key[1], p->park_tries);
+      return 0;
+    }
+    if (off >= PLANNER_PARK_AT) {
+      p->park_tries++;
+      return publish_release(p, now, &b, key, 0, err, errlen);
+    }
+    if (p->park_next == p->park_n) {
+      p->parking = 0;
+      return 0;
+    }
+  }
   if (publish_release(p, now, &b, p->park_way[p->park_next], 0, err, errlen)) return -1;
-  p->parking = ++p->park_next < p->park_n;
+  p->park_next++;
+  p->park_tries = 1;
   return 0;
 }
 

@@ -76,6 +76,11 @@ typedef struct {
  * of the grown box, three corners and the park point). */
 #define PLANNER_PARK_EXTRA 0.01
 #define PLANNER_PARK_LEGS 6
+/* A move's end is checked on ROBOT_STATE before the next: a sphere not within
+ * PLANNER_PARK_AT of it (the executor braked a move whose renewal came late, or it lags)
+ * is sent there again from where it is, at most PLANNER_PARK_TRIES times per point. */
+#define PLANNER_PARK_AT 0.005
+#define PLANNER_PARK_TRIES 5
 
 /* Niceness the planning threads add to the process's: below its LCM receive thread. */
 #define PLANNER_COMPUTE_NICE 5
@@ -123,6 +128,7 @@ typedef struct {
   double place_at;             /* when it came, s (ndp_mono) */
   int parking;                 /* the PLACE's park is under way (PLANNER_PARK_*) */
   int park_n, park_next;       /* the way's points, and the next one to move to */
+  int park_tries;              /* moves sent to the point before park_next */
   double park_way[PLANNER_PARK_LEGS][2];
 
   double plan_s;               /* recent plan time, s (moving average) */
