@@ -1,8 +1,6 @@
 /* test_cost: plan cost terms, their symmetry, and the terminal condition's edges. */
 #include "nd_test.h"
 
-#include <string.h>
-
 #include "nd_cost.h"
 #include "nd_math.h"
 #include "nd_rng.h"
@@ -184,17 +182,17 @@ static void test_cuboid_symmetry(void **state) {
   }
 }
 
-/* Moves along the way round from `from` to `to` (at most 8; the way's length into *len). */
+/* Moves along the way round from `from` to `to`, at most 8, their ends into pts and their
+ * length into *len; -1 where a step finds no way. */
 static int round_moves(const nd_cost_round *r, const double box[3], const double from[2],
-                       const double to[2], double *len) {
-  double at[2] = {from[0], from[1]}, next[2];
+                       const double to[2], double pts[8][2], double *len) {
+  const double *at = from;
   int moves = 0;
   *len = 0.0;
   while (nd_dist2(at, to) > 0.0 && moves < 8) {
-    if (nd_cost_round_next(r, box, at, to, next) < 0.0) return -1;
-    *len += nd_dist2(at, next);
-    memcpy(at, next, sizeof(at));
-    moves++;
+    if (nd_cost_round_next(r, box, at, to, pts[moves]) < 0.0) return -1;
+    *len += nd_dist2(at, pts[moves]);
+    at = pts[moves++];
   }
   return moves;
 }
@@ -206,23 +204,16 @@ static void test_round_next(void **state) {
   (void)state;
   const nd_cost_round w = {{0.05, 0.03}, 0.025, {-1, -1}, {1, 1}};
   const double b0[3] = {0, 0, 0}, to[2] = {-0.15, 0}, e = 1e-5;
-  double at[2] = {0.15, 0}, next[2];
+  const double at[2] = {0.15, 0};
+  double next[2], pts[8][2], len;
   const double way = nd_cost_round_next(&w, b0, at, to, next);
   assert_near(way, nd_cost_round_way(&w, b0, at, to), 1e-12);
-  double sum = 0.0;
-  int moves = 0;
-  while (nd_dist2(at, to) > 0.0 && moves < 6) {
-    assert_true(nd_cost_round_next(&w, b0, at, to, next) >= 0.0);
-    if (moves < 2) { /* (0.08, +-0.06), then (-0.08, the same side) */
-      assert_near(fabs(next[0]), 0.08, e);
-      assert_near(fabs(next[1]), 0.06, e);
-    }
-    sum += nd_dist2(at, next);
-    memcpy(at, next, sizeof(at));
-    moves++;
+  assert_int_equal(round_moves(&w, b0, at, to, pts, &len), 3);
+  for (int k = 0; k < 2; k++) { /* (0.08, +-0.06), then (-0.08, the same side) */
+    assert_near(fabs(pts[k][0]), 0.08, e);
+    assert_near(fabs(pts[k][1]), 0.06, e);
   }
-  assert_int_equal(moves, 3);
-  assert_near(sum, way, e);
+  assert_near(len, way, e);
   /* Clear: straight to the end. */
   assert_near(nd_cost_round_next(&w, b0, (double[]){0.1, 0.1}, (double[]){-0.1, 0.1}, next),
               0.2, e);
@@ -235,13 +226,12 @@ static void test_round_next(void **state) {
   /* From 2 mm inside a side (a sphere released clear of the object, but within the way's
    * margin) round a turned box: out, two corners, the end. */
   const double bt[3] = {0.001, -0.002, 0.03}, from_in[2] = {0.079, 0.004};
-  double len;
-  assert_int_equal(round_moves(&w, bt, from_in, to, &len), 4);
+  assert_int_equal(round_moves(&w, bt, from_in, to, pts, &len), 4);
   assert_near(len, nd_cost_round_way(&w, bt, from_in, to), e);
   /* An end within the grown box but clear of the sphere's reach into the object: round the
    * two corners, then in along the side (this end once sent the way back out of the box). */
   const double near_end[2] = {-0.078, 0.0};
-  assert_int_equal(round_moves(&w, b0, (double[]){0.15, 0}, near_end, &len), 3);
+  assert_int_equal(round_moves(&w, b0, (double[]){0.15, 0}, near_end, pts, &len), 3);
   /* The way's length counts the step in along the side; the last move takes it diagonally. */
   const double near_way = nd_cost_round_way(&w, b0, (double[]){0.15, 0}, near_end);
   assert_true(len <= near_way && len > near_way - 0.002);
@@ -271,23 +261,21 @@ static void test_round_next_random(void **state) {
   for (int t = 0; t < 20000; t++) {
     const double box[3] = {0.2 * nd_rng_uniform(&g) - 0.1, 0.2 * nd_rng_uniform(&g) - 0.1,
                            6.4 * nd_rng_uniform(&g) - 3.2};
-    double at[2] = {0.3 * nd_rng_uniform(&g) - 0.15, 0.7 * nd_rng_uniform(&g) - 0.3};
+    const double from[2] = {0.3 * nd_rng_uniform(&g) - 0.15, 0.7 * nd_rng_uniform(&g) - 0.3};
     const double to[2] = {0.3 * nd_rng_uniform(&g) - 0.15, 0.7 * nd_rng_uniform(&g) - 0.3};
-    if (in_box(box, at, 0.085, 0.065) || in_box(box, to, 0.085, 0.065)) continue;
-    int moves = 0;
-    double next[2];
-    while (moves < 6 && nd_cost_round_next(&r, box, at, to, next) >= 0.0) {
+    if (in_box(box, from, 0.085, 0.065) || in_box(box, to, 0.085, 0.065)) continue;
+    double pts[8][2], len;
+    if (nd_cost_round_next(&r, box, from, to, pts[0]) < 0.0) continue; /* none in reach */
+    const int moves = round_moves(&r, box, from, to, pts, &len);
+    assert_true(moves >= 1 && moves <= 6);
+    assert_true(nd_dist2(pts[moves > 1 ? moves - 1 : 0], to) == 0.0);
+    for (int k = 0; k < moves; k++) {
+      const double *a = k ? pts[k - 1] : from, *b = pts[k];
       for (int q = 1; q < 20; q++) {
-        const double m[2] = {at[0] + (next[0] - at[0]) * q / 20.0,
-                             at[1] + (next[1] - at[1]) * q / 20.0};
+        const double m[2] = {a[0] + (b[0] - a[0]) * q / 20.0, a[1] + (b[1] - a[1]) * q / 20.0};
         assert_false(in_box(box, m, 0.075, 0.055));
       }
-      memcpy(at, next, sizeof(at));
-      moves++;
-      if (nd_dist2(at, to) == 0.0) break;
     }
-    if (moves == 0) continue; /* no way within the keypoint box */
-    assert_true(nd_dist2(at, to) == 0.0);
     ways++;
   }
   assert_true(ways > 10000);
