@@ -59,12 +59,11 @@ int main(int argc, char **argv) {
   for (int i = 0; i < cfg.n && !ndp_quit; i++) {
     tasks_result r;
     if (cfg.place) {
-      const int park = cfg.park && i == 0;
-      const int pl = tasks_place(lcm, &io, &cfg, park, err, sizeof(err));
+      const int pl = tasks_place(lcm, &io, &cfg, err, sizeof(err));
       if (pl < 0) goto done;
       if (pl == 0 && !ndp_quit) {
         char pk[160] = "";
-        if (park)
+        if (cfg.park)
           snprintf(pk, sizeof(pk), ", with the sphere parked within %g m of (%g, %g) m "
                    "(nudge-planner's log says why not)", PARK_AT, cfg.park_xy[0],
                    cfg.park_xy[1]);

@@ -143,9 +143,9 @@ int tasks_options(int argc, char **argv, tasks_cfg *c) {
                "the sphere clear; on a robot, a person does): every task starts from the same "
                "pose, as the paper's evaluation tasks do"},
       {"park", ND_OPT_LIST, c->park_xy, -NDP_MAX_POS, NDP_MAX_POS, 2, .arg = "X,Y", .def = "",
-       .help = "with --place: before the first task, once the object is placed, the planner "
+       .help = "with --place: before each task, once the object is placed, the planner "
                "also takes the sphere round it to this point (m), and the runner waits for it "
-               "there: a set of tasks starts from one sphere pose as well as one object pose"},
+               "there: every task starts from one sphere pose as well as one object pose"},
       {"place-wait", ND_OPT_DOUBLE, &c->place_wait, 0.1, 3600.0, .arg = "S",
        .help = "with --place: how long to wait for the object at the pose before giving up "
                "(status 1)"},

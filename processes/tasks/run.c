@@ -258,22 +258,22 @@ static int parked(const tasks_io *io, const tasks_cfg *c) {
          PARK_AT;
 }
 
-/* One PLACE, re-sent until a frame captured after it shows the object there (and with park,
- * the sphere parked): 1, or 0 past c->place_wait (or interrupted), -1 with a message on an
- * LCM failure. */
-static int place_once(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, int park, char *err,
-                      int errlen) {
+/* One PLACE, re-sent until a frame captured after it shows the object there (and with
+ * --park, the sphere parked): 1, or 0 past c->place_wait (or interrupted), -1 with a
+ * message on an LCM failure. */
+static int place_once(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int errlen) {
   io->st.state = "placing";
   const nd_goal *g = &c->place_pose;
   const int64_t now_us = ndp_utime();
   const nudge_place_t m = {now_us, now_us, g->x, g->y, g->yaw, PLACE_CLEAR,
-                           (int8_t)park, c->park_xy[0], c->park_xy[1]};
+                           (int8_t)c->park, c->park_xy[0], c->park_xy[1]};
   const double t0 = ndp_mono();
   double sent = -INFINITY;
   int said = 0;
   while (!ndp_quit) {
     const double now = ndp_mono();
-    if (io->frames > 0 && io->last.utime > m.utime && at_pose(io, g) && (!park || parked(io, c)))
+    if (io->frames > 0 && io->last.utime > m.utime && at_pose(io, g) &&
+        (!c->park || parked(io, c)))
       return 1;
     if (now - t0 >= c->place_wait) return 0;
     if (!said && now - t0 >= PLACE_SAY) {
@@ -294,15 +294,14 @@ static int place_once(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, int park, ch
   return 0;
 }
 
-int tasks_place(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, int park, char *err,
-                int errlen) {
+int tasks_place(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int errlen) {
   const nd_goal *g = &c->place_pose;
   double pos = 0.0, yaw = 0.0;
   for (int k = 0; k < PLACE_TRIES; k++) {
     if (k > 0)
       fprintf(stderr, PROG ": the object was moved %.1f mm and %.3f rad off the placed pose "
               "before the task: placing it again\n", 1e3 * pos, yaw);
-    const int pl = place_once(lcm, io, c, park, err, errlen);
+    const int pl = place_once(lcm, io, c, err, errlen);
     if (pl <= 0) return pl;
     if (tasks_settle(lcm, io, c, err, errlen)) return -1;
     if (ndp_quit || io->no_record || at_pose(io, g)) return 1;

@@ -59,8 +59,8 @@
  * sphere still on its way out, a hand) is placed again, at most PLACE_TRIES times. Each
  * PLACE has a new place_id, the wall clock in us (ids only increase). */
 #define PLACE_TRIES 3
-/* --park: the first task's PLACE also asks the planner to take the sphere round the placed
- * object to the park point; placed means the sphere within PARK_AT of it too. */
+/* --park: every PLACE also asks the planner to take the sphere round the placed object to
+ * the park point; placed means the sphere within PARK_AT of it too. */
 #define PARK_AT 0.01       /* m */
 
 /* What the runner was asked to do; constant once parsed. */
@@ -80,7 +80,7 @@ typedef struct {
   int place;                     /* 1: put the object at place_pose before each task */
   nd_goal place_pose;
   double place_wait;             /* s */
-  int park;                      /* 1: the first placement also parks the sphere at park_xy */
+  int park;                      /* 1: every placement also parks the sphere at park_xy */
   double park_xy[2];             /* m */
   nd_goal goals[MAX_GOALS];
   int n;
@@ -184,13 +184,12 @@ void tasks_print(int i, int n, const nd_goal *g, const tasks_result *r);
 const char *tasks_reflex_name(int reflex, int joint);
 /* After a task: await the fit of its record (--await-fit). */
 int tasks_pause(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int errlen);
-/* Before a task, with c->place: ask for the object at c->place_pose (PLACE; with park,
- * the sphere at c->park_xy too) and wait until MOCAP shows it there, then settle
+/* Before a task, with c->place: ask for the object at c->place_pose (PLACE; with
+ * c->park, the sphere at c->park_xy too) and wait until MOCAP shows it there, then settle
  * (tasks_settle); an object moved off the pose meanwhile is placed again, at most
  * PLACE_TRIES times, then the task is not recorded. 1 if placed, 0 if not within
  * c->place_wait (or interrupted), -1 with a message on an LCM failure. */
-int tasks_place(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, int park, char *err,
-                int errlen);
+int tasks_place(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int errlen);
 /* Before a task: wait c->settle s, then until the object is at rest and the commands have
  * held the sphere for SETTLE_CMD_REST (at most SETTLE_MAX); if not, say so and set
  * io->no_record. 0, or -1 with a message on an LCM failure. */
