@@ -258,9 +258,10 @@ static int parked(const tasks_io *io, const tasks_cfg *c) {
          PARK_AT;
 }
 
-/* One PLACE, re-sent until a frame captured after it shows the object there (and with
- * --park, the sphere parked): 1, or 0 past c->place_wait (or interrupted), -1 with a
- * message on an LCM failure. */
+/* One PLACE, re-sent until a frame captured after it shows the object there and, with
+ * --park, one the sphere parked (the object may be knocked off the pose by then:
+ * tasks_place checks it once settled, and places it again): 1, or 0 past c->place_wait (or
+ * interrupted), -1 with a message on an LCM failure. */
 static int place_once(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int errlen) {
   io->st.state = "placing";
   const nd_goal *g = &c->place_pose;
@@ -269,12 +270,11 @@ static int place_once(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, i
                            (int8_t)c->park, c->park_xy[0], c->park_xy[1]};
   const double t0 = ndp_mono();
   double sent = -INFINITY;
-  int said = 0;
+  int said = 0, seen = 0;
   while (!ndp_quit) {
     const double now = ndp_mono();
-    if (io->frames > 0 && io->last.utime > m.utime && at_pose(io, g) &&
-        (!c->park || parked(io, c)))
-      return 1;
+    if (io->frames > 0 && io->last.utime > m.utime && !seen) seen = at_pose(io, g);
+    if (seen && (!c->park || parked(io, c))) return 1;
     if (now - t0 >= c->place_wait) return 0;
     if (!said && now - t0 >= PLACE_SAY) {
       fprintf(stderr, PROG ": waiting for the object at (%g, %g) m, yaw %g rad (PLACE)\n", g->x,
