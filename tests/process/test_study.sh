@@ -5,13 +5,16 @@
 #
 # 1. Bad arguments are refused with status 2 and a message naming the input, before
 #    anything starts; a results directory that holds a study is refused (status 1).
+#    Each world's training goals (--show-goals) repeat under one seed, differ under another
+#    and lie in its ring and yaw range.
 # 2. One run of two episodes from sliding and torsional friction half the truth's: every episode's row
 #    is there, theta's seven entries and their stds in their columns (the four given
 #    completed with the box's neutral 1, 0, 0, which the fit, not fitting them, keeps),
 #    with the fit it evaluated (versions 0, 1, 2 on 0, 1, 2 rollouts), the
 #    buffers hold the two training pushes and the five held-out evaluation tasks (less any
 #    met at the start or that left the object still: nothing recorded), a training push
-#    left unrecorded is drawn again and said so, the validation loss was scored for each
+#    left unrecorded is drawn again and said so, the training goals are --show-goals' in the
+#    order drawn, the validation loss was scored for each
 #    row, every record starts with the object placed, at rest and the sphere released
 #    clear of it, the training commands kept to --train-v-max and the evaluation's did
 #    not, the sliding error at episode 2 is below half the starting 50 %, the validation
@@ -50,7 +53,29 @@ refused 2 "--await-fit" --out "$PT_WORK/x" --theta 1,0.005,0.0001,1,1.1,-0.004,1
 refused 2 "--replay-mode" --out "$PT_WORK/x" --replay-mode setpoint
 refused 2 "eps" --out "$PT_WORK/x" --eps 7
 refused 2 "--train-v-max" --out "$PT_WORK/x" --train-v-max -1
+refused 2 "--show-goals" --show-goals 0
 pt_check_not "nothing was started or written for refused arguments" test -e "$PT_WORK/x/config.txt"
+
+# --- 1b. training goals ------------------------------------------------------------------
+# goals_in WORLD RMIN YMIN YMAX XMAX: 4 runs x 25 of the world's goals, the same on a second
+# call, differing under another seed, each RMIN-0.15 m from the origin (0.5 mm for rounding),
+# turned YMIN-YMAX rad and within |x| <= XMAX.
+goals_in() {
+  local w=$1 a b c
+  a=$("$STUDY" --world "$w" --runs 4 --show-goals 25)
+  b=$("$STUDY" --world "$w" --runs 4 --show-goals 25)
+  c=$("$STUDY" --world "$w" --runs 4 --show-goals 25 --seed 2)
+  pt_check "$w training goals: the same for the same seed" test -n "$a" -a "$a" = "$b"
+  pt_check "$w training goals: others for another seed" test "$a" != "$c"
+  pt_check "$w training goals: 100 of them, $2-0.15 m out, |yaw| $3-$4 rad, |x| <= $5 m" \
+    awk -v r0="$2" -v y0="$3" -v y1="$4" -v x1="$5" '
+      { for (i = 3; i <= NF; i++) { split($i, g, ","); n++; r = sqrt(g[1] ^ 2 + g[2] ^ 2)
+          y = g[3] < 0 ? -g[3] : g[3]; x = g[1] < 0 ? -g[1] : g[1]
+          if (r < r0 - 5e-4 || r > 0.1505 || y < y0 || y > y1 || x > x1) bad++ } }
+      END { exit !(n == 100 && bad == 0) }' <<<"$a"
+}
+goals_in ideal 0.08 0 0.4 0.15
+goals_in lab 0.08 0 0.4 0.12
 
 # --- 2. one run, two episodes ------------------------------------------------------------
 OUT=$PT_WORK/study
@@ -137,7 +162,8 @@ n_eval=$(cat "$OUT"/run_0/eval_ep*.txt | grep -c '^task [0-9]')
 n_park=$(grep -cE ": the sphere parks at \(-0\.100, \+0\.000\) m, round the object at $at0 m" "$PLOG")
 pt_check "the planner parked the sphere before each of the $n_eval evaluation tasks (got $n_park)" \
   test "$n_eval" -eq 15 -a "$n_park" -ge "$n_eval"
-pt_check_not "no park was given up" grep -q 'the sphere does not park' "$PLOG"
+pt_check_not "no park was given up$(grep -m1 -o 'does not park.*' "$PLOG" | sed 's/^/ (/; s/$/)/')" \
+  grep -q 'the sphere does not park' "$PLOG"
 n_end=$(grep -cE ': task [0-9]+ (succeeded|timed out|ended in a reflex stop) after' "$PLOG")
 n_rel=$(grep -c ': released: ' "$PLOG")
 pt_check "the planner released the sphere after each of the $n_end tasks that ended (got $n_rel)" \
@@ -165,6 +191,22 @@ pt_check "the study said so for each training push it drew again ($n_tries)" \
   test "$(grep -c 'was not recorded: .*; drawing another$' "$PT_WORK/study.err")" = "$n_tries"
 pt_check "the planner planned the $((2 + n_tries)) training tasks at $TV m/s" \
   test "$(grep -c "started: .*speed limit $TV m/s" "$PLOG")" = $((2 + n_tries))
+# The study pushed to the goals --show-goals gives run 0, in the order it drew them (the
+# task lines give x, y to 0.01 m and the yaw to 0.1 degrees).
+drawn=""
+for e in 1 2; do
+  for f in $(ls -v "$OUT"/run_0/train_ep${e}_try*.txt 2>/dev/null) "$OUT/run_0/train_ep$e.txt"; do
+    drawn+=" $(sed -n 's/^task 1\/1 goal (\([^,]*\), \([^,]*\), \([^ ]*\) deg).*/\1,\2,\3/p' "$f")"
+  done
+done
+shown=$("$STUDY" --runs 1 --show-goals $((2 + n_tries)) | cut -d' ' -f3-)
+pt_check "the training goals pushed to are --show-goals' ($drawn against $shown)" \
+  awk -v d="$drawn" -v s="$shown" 'BEGIN { n = split(d, a, " "); m = split(s, b, " ")
+    if (n != m || n < 2) exit 1
+    for (i = 1; i <= n; i++) { split(a[i], p, ","); split(b[i], q, ",")
+      if ((p[1] - q[1]) ^ 2 > 0.0051 ^ 2 || (p[2] - q[2]) ^ 2 > 0.0051 ^ 2) exit 1
+      if ((p[3] - q[3] * 180 / atan2(0, -1)) ^ 2 > 0.051 ^ 2) exit 1 }
+    exit 0 }'
 fig() { awk -v n="$1" '$1 == n { print $2 }' "$PT_WORK/study.out"; }
 for f in eval_success_ep0 eval_success_ep2 eval_success_last eval_time_ratio_ep2 \
   eval_time_ratio_last eval_time_ep0 eval_time_ep2 val_loss_ratio_ep2 reflex_stops \
