@@ -75,7 +75,7 @@ goals_in() {
       END { exit !(n == 100 && bad == 0) }' <<<"$a"
 }
 goals_in ideal 0.08 0 0.4 0.15
-goals_in lab 0.08 0 0.4 0.12
+goals_in lab 0.12 0.2 0.5 0.12
 
 # --- 2. one run, two episodes ------------------------------------------------------------
 OUT=$PT_WORK/study
