@@ -109,7 +109,7 @@ else
       awk -v h="$hold" -v b="$bound" 'BEGIN { exit !(h <= b) }'
   fi
 fi
-pt_check "EPISODE: the task reached its goal" \
+pt_check_soon 5 "EPISODE: the task reached its goal" \
   pt_lc episodes "$(pt_events "$LOG")" --min-start 1 --min-success 1
 pt_val t_end episodes "$(pt_events "$LOG")" episode_1_end_utime
 pt_figure success_after_kill $(((${t_end:-0} - t_kill) / 1000)) ms

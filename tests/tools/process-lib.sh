@@ -34,6 +34,16 @@ pt_check() {
   if "$@"; then pt_ok "$what"; else pt_fail "$what"; fi
 }
 
+# pt_check_soon SECONDS DESCRIPTION COMMAND...: pt_check once COMMAND succeeds or SECONDS
+# pass. For a log a running lcm-logger writes: it flushes every 100 ms, later when starved,
+# so an event published just before the check may not be in the file yet.
+pt_check_soon() {
+  local s=$1
+  shift
+  pt_wait_for "$s" "${@:2}"
+  pt_check "$@"
+}
+
 # pt_on_cleanup FUNCTION: call FUNCTION (a name, no arguments) at exit, after everything
 # started has stopped and before the work directory is removed: e.g. unmount what the test
 # mounted there, which rm -rf cannot remove. A function, not a string to eval, so no path
