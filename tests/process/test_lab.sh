@@ -174,7 +174,8 @@ if pt_up_wait "$RUN" 30 "$up"; then
   n_stopped=$(grep -c '^task .* stopped after ' "$PT_WORK/reflex-tasks.out")
   pt_check "the runner counted every stop ($n_stopped task lines)" \
     grep -q "^reflex_stops $n_stopped count" "$PT_WORK/reflex-tasks.out"
-  pt_check_soon 5 "EPISODE: both tasks started and ended" pt_lc episodes "$(pt_events "$LOG2")" --min-start 2 --min-end 2
+  pt_check_soon 5 "EPISODE: both tasks started and ended" \
+    pt_lc episodes "$(pt_events "$LOG2")" --min-start 2 --min-end 2
   pt_lc robot-state "$LOG2" >"$PT_WORK/rs2"
   cat "$PT_WORK/rs2"
   v=$(fig robot_stops "$PT_WORK/rs2")
