@@ -29,7 +29,7 @@ int main(int argc, char **argv) {
   pc.redraws = 8;
   /* The task ends when it meets eps: plans are scored by when they get there, not by the
    * horizon's end alone (doc/decisions.md#arrival). A world the model predicts less well
-   * wants plans aimed inside eps (nudge-up --world lab: 0.6). */
+   * wants plans aimed inside eps (nudge-up --world lab: LAB_PLAN_AIM). */
   pc.arrival = 1.0;
   for (int k = 0; k < 2; k++) o.ws.lo[k] = pc.ws_lo[k], o.ws.hi[k] = pc.ws_hi[k];
   nd_opt opts[] = {
