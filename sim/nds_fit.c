@@ -149,8 +149,6 @@ int nds_fit_cfg_check(const nds_fit_cfg *c, char *err, int errlen) {
     bad = "phases must be in [1, 16]";
   else if (c->phases > 1 && !(c->replay.window > 0 && c->robust == 0 && c->lm_iters == 0))
     bad = "phases > 1 needs replay.window > 0, robust 0 and lm_iters 0";
-  else if (!(isfinite(c->map_w) && c->map_w >= 0)) bad = "map_w must be finite and >= 0";
-  else if (c->map_w > 0 && c->lm_iters > 0) bad = "map_w > 0 needs lm_iters 0";
   for (int i = 0; !bad && i < ND_NTHETA; i++) {
     if (c->scan[i] == 0) continue;
     if (c->scan[i] < 2 || c->scan[i] > NDS_FIT_MAX_SCAN || !c->fit[i])
@@ -164,8 +162,6 @@ int nds_fit_cfg_check(const nds_fit_cfg *c, char *err, int errlen) {
       bad = "upper must be > lower (INFINITY: none)";
     else if (c->logfit[i] == 1 && nd_theta_signed(i))
       bad = "logfit needs a parameter that cannot be negative";
-    else if (c->map[i] && !(c->map[i] == 1 && c->fit[i] && !c->logfit[i]))
-      bad = "map needs a fitted parameter not searched as a log, or 0";
     else if (nd_theta_signed(i) && !(c->upper[i] > 0 && c->upper[i] <= ND_THETA_COM_MAX))
       bad = "a signed parameter's upper must be in (0, ND_THETA_COM_MAX]";
   }
@@ -230,7 +226,6 @@ void nds_fit_free(nds_fit *f) {
   free(f->theta);
   free(f->terms);
   free(f->done);
-  free(f->pen);
   free(f->left);
   free(f->cut);
   free(f->top);
@@ -297,12 +292,11 @@ nds_fit *nds_fit_create(const nds_model *proto, const nds_fit_cfg *cfg, nd_pool 
   if (f->nelite > cfg->pop) f->nelite = cfg->pop;
   f->theta = malloc(sizeof(double) * ND_NTHETA * f->cand_cap);
   f->done = malloc(sizeof(double) * f->cand_cap);
-  f->pen = calloc(f->cand_cap, sizeof(double));
   f->left = malloc(sizeof(int) * f->cand_cap);
   f->cut = malloc(f->cand_cap);
   f->top = malloc(sizeof(double) * f->nelite);
   f->order = malloc(sizeof(int) * f->cand_cap);
-  if (!f->theta || !f->done || !f->pen || !f->left || !f->cut || !f->top || !f->order) goto oom;
+  if (!f->theta || !f->done || !f->left || !f->cut || !f->top || !f->order) goto oom;
   if (pthread_mutex_init(&f->lock, NULL)) goto oom;
   f->lock_init = 1;
   nd_rng_seed(&f->rng, cfg->seed, 0);
@@ -495,14 +489,14 @@ static void order_by_done(nds_fit *f, int ncand) {
 /* Replay f->theta[0, ncand) on the current buffer; loss[c] sums each candidate's rollout
  * scores in buffer order, so the result does not depend on which worker ran what. The
  * score is the robust one with robust > 0, else L. prune: a CEM iteration, pruned as
- * cfg.prune says (pruned candidates get +inf), each candidate's prior term f->pen added;
- * the order candidates are replayed in changes only what is pruned, never a result. */
+ * cfg.prune says (pruned candidates get +inf); the order candidates are replayed in
+ * changes only what is pruned, never a result. */
 static void eval_batch(nds_fit *f, int ncand, int prune, double robust, double *loss) {
   f->bounded = prune && f->cfg.prune && ncand > f->nelite;
   f->robust = robust;
   f->ntop = 0;
   for (int c = 0; c < ncand; c++) {
-    f->done[c] = prune ? f->pen[c] * f->cfg.phases : 0;
+    f->done[c] = 0;
     f->left[c] = f->nr;
     f->cut[c] = 0;
     f->order[c] = c;
@@ -520,7 +514,7 @@ static void eval_batch(nds_fit *f, int ncand, int prune, double robust, double *
       f->done[c] = d2;  /* scratch until the pool runs */
     }
     order_by_done(f, ncand);
-    for (int c = 0; c < ncand; c++) f->done[c] = f->pen[c] * f->cfg.phases;
+    for (int c = 0; c < ncand; c++) f->done[c] = 0;
   }
   if (f->bounded && f->nr > 1) {
     /* Two passes: every candidate's first rollout, then the rest in the order of that
@@ -539,28 +533,13 @@ static void eval_batch(nds_fit *f, int ncand, int prune, double robust, double *
   for (int c = 0; c < ncand; c++) {
     double L = 0;
     for (int r = 0; r < f->nr; r++) L += score(f, &f->terms[(size_t)c * f->nr + r]);
-    loss[c] = f->cut[c] ? INFINITY : L / f->cfg.phases + (prune ? f->pen[c] : 0);
+    loss[c] = f->cut[c] ? INFINITY : L / f->cfg.phases;
   }
-}
-
-/* The prior term (cfg.map_w) of candidate theta th; a map entry's scale is its sigma0. */
-static double prior_term(const nds_fit *f, const double *th) {
-  double s = 0;
-  for (int j = 0; j < f->nfit; j++) {
-    const int i = f->idx[j];
-    if (!f->cfg.map[i]) continue;
-    const double e = (th[i] - f->cfg.mu0[i]) / f->scale[j];
-    s += e * e;
-  }
-  return f->cfg.map_w * s;
 }
 
 static int cem_cost(void *ctx, const double *x, int n, double *cost) {
   nds_fit *f = ctx;
-  for (int c = 0; c < n; c++) {
-    nds_fit_to_theta(f, x + (size_t)c * f->nfit, f->theta + ND_NTHETA * c);
-    f->pen[c] = prior_term(f, f->theta + ND_NTHETA * c);
-  }
+  for (int c = 0; c < n; c++) nds_fit_to_theta(f, x + (size_t)c * f->nfit, f->theta + ND_NTHETA * c);
   eval_batch(f, n, 1, f->cfg.robust, cost);
   for (int c = 0; c < n; c++) {
     if (isfinite(cost[c])) {

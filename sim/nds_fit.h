@@ -92,14 +92,6 @@ typedef struct {
                                   and a loss flat away from the truth holds it wherever it
                                   starts (doc/decisions.md#scan). Fitted parameters only */
   double scan_lo[ND_NTHETA], scan_hi[ND_NTHETA];  /* lower <= lo < hi where scan > 0 */
-  int map[ND_NTHETA];         /* 1: the prior (mu0, sigma0) of this fitted entry, not
-                                  searched as a log, also enters CEM's ranking (map_w) */
-  double map_w;                /* m^2; > 0: CEM ranks candidates by L + map_w times the sum
-                                  of ((theta_i - mu0_i) / sigma0_i)^2 over the map entries,
-                                  the log posterior of a Gaussian prior, which keeps a few
-                                  rollouts from pulling those entries far on contact noise
-                                  (doc/decisions.md#map-prior). 0, the default: by L. Needs
-                                  lm_iters 0: the refinement knows no prior */
   uint64_t seed;
 } nds_fit_cfg;
 
@@ -140,8 +132,7 @@ typedef struct {
   double mean[ND_NTHETA];     /* distribution after the run; held parameters: their value */
   double std[ND_NTHETA];      /* held parameters: 0 */
   double best[ND_NTHETA];     /* lowest-loss candidate of the run */
-  double best_loss;            /* its score (L, or the robust score with cfg.robust; plus
-                                  the prior's term with cfg.map_w) */
+  double best_loss;            /* its score (L, or the robust score with cfg.robust) */
   double loss_mean;            /* L(mean) on the buffer, evaluated after the last update */
   int diverged_mean;           /* replays of the mean that diverged */
   int iters;

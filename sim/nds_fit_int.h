@@ -39,9 +39,7 @@ struct nds_fit {
   int bounded;          /* this batch may prune (CEM iterations, not single evaluations) */
   double robust;        /* this batch's robust scale (0: it scores L) */
   pthread_mutex_t lock; /* guards the fields below during a batch */
-  double *done;         /* cand_cap: L of each candidate's finished replays (any order),
-                         * from its prior term (pen) times cfg.phases in a CEM batch */
-  double *pen;          /* cand_cap: each candidate's prior term (cfg.map_w), or 0 */
+  double *done;         /* cand_cap: L of each candidate's finished replays (any order) */
   int *left;            /* cand_cap: replays not yet finished */
   unsigned char *cut;   /* cand_cap: candidate dropped */
   double *top;          /* nelite smallest complete totals, ascending */

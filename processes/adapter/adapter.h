@@ -36,7 +36,6 @@ typedef struct {
   unsigned fit;               /* bit i: theta[i] fitted */
   unsigned logfit;            /* bit i: theta[i] searched as ln theta */
   unsigned scan;              /* bit i: theta[i] scanned over its prior's range (cfg.scan) */
-  unsigned map;               /* bit i: theta[i]'s prior enters the ranking (cfg.map) */
   double theta[ND_NTHETA];    /* prior mean; value of held parameters */
   double ref[ND_NTHETA];      /* nominal theta the prior std is sized from */
   double D;                   /* prior uncertainty of the paper's formula */

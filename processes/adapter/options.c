@@ -111,13 +111,6 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
                "replay options above, print its loss L and L's terms summed over the rollouts "
                "as 'name value unit' lines and exit (a validation loss on held-out rollouts, "
                "as nudge-study uses it)"},
-      {"map", ND_OPT_CUSTOM, &o->map, .parse = parse_list, .arg = "LIST", .def = "none",
-       .help = "fitted parameters, not of --log-fit, whose prior (mean --theta, the std "
-               "--prior-d sizes) enters CEM's ranking with --map-weight: a few rollouts then "
-               "pull them from the prior only as far as the loss pays for "
-               "(doc/decisions.md#map-prior); not with --lm-iters; none: off"},
-      {"map-weight", ND_OPT_DOUBLE, &fc->map_w, 0, 1, .arg = "W",
-       .help = "weight of --map's prior, m^2 of L per squared prior std (0: off)"},
       {"pop", ND_OPT_INT, &fc->pop, 2, 4096, .arg = "Q",
        .help = "CEM population Q (the paper's 32)"},
       {"iters", ND_OPT_INT, &fc->iters, 1, NDS_FIT_MAX_ITERS, .arg = "C",
@@ -150,10 +143,6 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
                         : snprintf(o->history, sizeof(o->history), "%s.history", o->buffer);
   if (n < 0 || n >= (int)sizeof(o->history) || strlen(o->buffer) >= ND_RFILE_PATH_MAX)
     return nd_opt_fail(&spec, "--buffer / --history: path too long");
-  if ((o->map & o->logfit) || (o->map & ~o->fit))
-    return nd_opt_fail(&spec, "--map: a parameter of it is not fitted or is in --log-fit");
-  if (o->map && fc->map_w > 0 && fc->lm_iters > 0)
-    return nd_opt_fail(&spec, "--map needs --lm-iters 0: the refinement knows no prior");
   if (fc->phases > 1 && !(o->replay_window > 0 && o->robust == 0 && fc->lm_iters == 0))
     return nd_opt_fail(&spec, "--replay-phases %d needs --replay-window above 0 and neither "
                        "--robust nor --lm-iters", fc->phases);
@@ -181,7 +170,6 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
       fc->scan_lo[i] = fmax(nds_fit_floor(fc, i), lo);
       fc->scan_hi[i] = fmin(fc->upper[i], hi);
     }
-    fc->map[i] = fc->map_w > 0 && (o->map >> i & 1);
     if ((o->logfit >> i & 1) && fc->fit[i]) {
       /* nds_fit takes a log parameter's std as theta times the std of ln theta. */
       fc->logfit[i] = 1;

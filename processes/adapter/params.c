@@ -140,7 +140,7 @@ void adapter_banner(const adapter *a, const nds_fit *fit, const nds_fit_cfg *fc,
   const adapter_opts *o = a->o;
   double m0[ND_NTHETA], s0[ND_NTHETA];
   nds_fit_dist(fit, m0, s0);
-  char fitted[80], rank[160] = "L", scanned[80] = "none", ref[200], mean[200], std[200];
+  char fitted[80], rank[64] = "L", scanned[80] = "none", ref[200], mean[200], std[200];
   char window[32] = "all";
   if (o->max_rollouts > 0) snprintf(window, sizeof(window), "the newest %d", o->max_rollouts);
   nd_theta_str(o->ref, ", ", ref, sizeof(ref));
@@ -149,12 +149,6 @@ void adapter_banner(const adapter *a, const nds_fit *fit, const nds_fit_cfg *fc,
   nd_theta_mask_str(o->fit, fitted, sizeof(fitted));
   if (o->scan & o->fit) nd_theta_mask_str(o->scan & o->fit, scanned, sizeof(scanned));
   if (fc->robust > 0) snprintf(rank, sizeof(rank), "the robust score of scale %g m^2", fc->robust);
-  if (fc->map_w > 0 && o->map) {
-    char mapped[80];
-    nd_theta_mask_str(o->map, mapped, sizeof(mapped));
-    const size_t k = strlen(rank);
-    snprintf(rank + k, sizeof(rank) - k, " + %g x prior (%s)", fc->map_w, mapped);
-  }
   fprintf(stderr,
           PROG ": buffer %s, history %s (%lld entries%s), fit %s, CEM Q %d C %d rho %.2g, "
           "prior D %g on (%s), %s (%s) std (%s), replay %s dt %g s window %g s x %d phase(s) "
