@@ -161,6 +161,28 @@ if pt_up_wait "$RUN" 30 "$up"; then
   pt_check "the PLACE resumed the stopped arm and the object was put down" \
     pt_wait_for 15 grep -qF "$placed" "$RUN/bridge.log"
   pt_check_not "no PLACE dropped" grep -q 'dropped: the sphere stayed' "$RUN/bridge.log"
+  # A stop while the sphere parks: plans out of reach stop the arm on its way to the park
+  # point. The runner places again, which resumes it; the planner parks anew; the task runs.
+  n_park=$(grep -c 'the sphere parks at' "$RUN/planner.log")
+  n_stop=$(grep -c 'the robot stopped' "$RUN/bridge.log")
+  pt_spawn tasks "$PT_BIN/nudge-tasks" --world lab --place 0,0,0 --park -0.10,0 \
+    --goal 0.10,0.10,0.4 --tau "$(pt_slow 2)" --place-wait "$(pt_slow 30)" \
+    >"$PT_WORK/park-stop.out" 2>"$PT_WORK/park-stop.err"
+  pt_wait_for 30 eval '(( $(grep -c "the sphere parks at" "$RUN/planner.log") > n_park ))' ||
+    pt_fail "the planner did not start a park"
+  drive_to_stop "$n_stop" 12
+  pt_check "the arm stopped while the sphere parked" \
+    test "$(grep -c 'the robot stopped' "$RUN/bridge.log")" -gt "$n_stop"
+  if pt_wait_pid "$tasks" "$(pt_slow 60)"; then
+    pt_check "nudge-tasks exits 0 after a stop in the park (got $PT_RC)" test "$PT_RC" -eq 0
+  else
+    pt_fail "nudge-tasks did not finish after a stop in the park"
+  fi
+  cat "$PT_WORK/park-stop.out"
+  pt_check "the runner placed again to resume the arm" \
+    grep -q 'stopped on a reflex while placing: placing again' "$PT_WORK/park-stop.err"
+  pt_check "the task ran from the park" \
+    grep -qE '^task 1/1 .*(reached|timed out|stopped after)' "$PT_WORK/park-stop.out"
   pt_stop_logger
   pt_up_stop "$up" 30
   pt_check "nudge-up run exits 0 after SIGINT (got $PT_RC)" test "$PT_RC" -eq 0
