@@ -20,6 +20,8 @@
 #    not, the sliding error at episode 2 is below half the starting 50 %, the validation
 #    loss fell, and the summary lines, summary.csv and (with gnuplot) both figures are
 #    written.
+# 3. --episodes 0: the five evaluation tasks alone at a held theta, no training push and no
+#    refit; eval_time_ep0 is their mean, and no figure of a fit or a later episode is printed.
 set -u
 PT_NAME=test_study
 PT_NO_LOGGER=1
@@ -229,6 +231,30 @@ if command -v gnuplot >/dev/null; then
   done
 fi
 refused 1 "holds results" --out "$OUT" --runs 1
+
+# --- 3. the evaluation alone -------------------------------------------------------------
+OUT0=$PT_WORK/held
+"$STUDY" --out "$OUT0" --runs 1 --episodes 0 --theta 1,0.005,0.0001,1 --tau "$(pt_slow 5)" \
+  >"$PT_WORK/held.out" 2>"$PT_WORK/held.err"
+rc=$?
+cat "$PT_WORK/held.out"
+pt_check "nudge-study --episodes 0 exits 0 (got $rc)" test "$rc" -eq 0
+pt_check "run_0.csv: episode 0 alone, at the given theta (version 0)" \
+  awk -F, 'NR == 2 && !($1 == 0 && $2 == 0 && $4 == 1 && $5 == 0.005) { bad = 1 }
+    END { exit bad || NR != 2 }' "$OUT0/run_0.csv"
+pt_check "the five evaluation tasks ran" \
+  test "$(grep -c '^task [1-5]/5 goal' "$OUT0/run_0/eval_ep0.txt")" -eq 5
+pt_check_not "no training push, no refit" \
+  grep -q '^refit version' "$OUT0/run_0/logs/adapter.log"
+held() { awk -v n="$1" '$1 == n { print $2 }' "$PT_WORK/held.out"; }
+pt_check "eval_time_ep0 is the five tasks' mean ($(held eval_time_ep0) s)" \
+  awk -v t="$(held eval_time_ep0)" '/^task [1-5]\/5 goal/ && match($0, /(in|after) [0-9.]+ s/) {
+      split(substr($0, RSTART, RLENGTH), w, " "); s += w[2]; n++ }
+    END { exit !(n == 5 && t > 0 && (s / n - t) ^ 2 < 1e-5) }' "$OUT0/run_0/eval_ep0.txt"
+pt_check_not "no figure of a fit or of later episodes" \
+  grep -qE '^(eval_time_ratio|eval_success_(ep2|last)|val_loss|runs_sliding|torsional)' \
+  "$PT_WORK/held.out"
 pt_sanitizer_scan "$OUT" || true
+pt_sanitizer_scan "$OUT0" || true
 ((PT_FAILS)) && { tail -n 20 "$PT_WORK/study.err"; pt_dump_logs 2>/dev/null; }
 exit $((PT_FAILS > 0))
