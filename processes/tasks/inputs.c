@@ -52,10 +52,9 @@ static void use_robot_state(void *user, const nudge_robot_state_t *m) {
   /* A robot still stopped from the last task resumes when this task's TASK reaches the
    * bridge: only a stop after it has moved again is this task's. */
   if (m->mode != NUDGE_ROBOT_STATE_T_MODE_STOPPED && io->run.id >= 0) io->run.resumed = 1;
-  if (io->run.id >= 0) {
-    const double v = hypot(m->ee_vel[0], m->ee_vel[1]);
-    if (v > io->run.ee_speed_max) io->run.ee_speed_max = v;
-  }
+  const double v = hypot(m->ee_vel[0], m->ee_vel[1]);
+  if (v >= REST_SPEED) io->ee_moving_at = ndp_mono();
+  if (io->run.id >= 0 && v > io->run.ee_speed_max) io->run.ee_speed_max = v;
   if (m->mode == NUDGE_ROBOT_STATE_T_MODE_STOPPED && io->run.id >= 0 && io->run.resumed &&
       !io->run.stopped) {
     io->run.stopped = 1;
@@ -126,7 +125,7 @@ int tasks_subscribe(tasks_io *io, lcm_t *lcm, char *err, int errlen) {
    * always: it says when a reflex stopped the robot; EE_CMD always: its top speed. */
   io->run.id = -1;
   io->robot_stopped = -1;  /* unknown: a stop before the runner started is not counted */
-  io->cmd_moving_at = -INFINITY;
+  io->cmd_moving_at = io->ee_moving_at = -INFINITY;
   lcm_subscription_t *rs = lcm_subscribe(lcm, NDP_CH_ROBOT_STATE, on_robot_state_raw, io);
   lcm_subscription_t *plan = lcm_subscribe(lcm, NDP_CH_PLAN, on_plan_raw, io);
   lcm_subscription_t *cmd = lcm_subscribe(lcm, NDP_CH_EE_CMD, on_ee_cmd_raw, io);

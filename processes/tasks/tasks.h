@@ -59,6 +59,10 @@
  * sphere still on its way out, a hand) is placed again, at most PLACE_TRIES times. Each
  * PLACE has a new place_id, the wall clock in us (ids only increase). */
 #define PLACE_TRIES 3
+/* A reflex stop while placing is acknowledged with a new PLACE once ROBOT_STATE has shown
+ * the sphere under REST_SPEED for STOP_REST: the stopped arm brakes back to where the reflex
+ * read it, and one resumed while it still brakes meets its held setpoint in a jump. */
+#define STOP_REST 0.3      /* s */
 /* --park: every PLACE also asks the planner to take the sphere round the placed object to
  * the park point; placed means the sphere within PARK_AT of it too. */
 #define PARK_AT 0.01       /* m */
@@ -142,6 +146,7 @@ typedef struct {
   int robot_stopped;  /* the newest ROBOT_STATE said STOPPED (1) or not (0); -1 before one */
   int stops_between;  /* reflex stops that began while no task ran (a release, idle) */
   double cmd_moving_at; /* ndp_mono() of the newest EE_CMD not HOLDING; -inf before one */
+  double ee_moving_at;  /* ndp_mono() of the newest ROBOT_STATE at REST_SPEED or faster */
 } tasks_io;
 
 /* How one task ended. */

@@ -165,6 +165,7 @@ if pt_up_wait "$RUN" 30 "$up"; then
   # point. The runner places again, which resumes it; the planner parks anew; the task runs.
   n_park=$(grep -c 'the sphere parks at' "$RUN/planner.log")
   n_stop=$(grep -c 'the robot stopped' "$RUN/bridge.log")
+  n_lines=$(wc -l <"$RUN/bridge.log")
   pt_spawn tasks "$PT_BIN/nudge-tasks" --world lab --place 0,0,0 --park -0.10,0 \
     --goal 0.10,0.10,0.4 --tau "$(pt_slow 2)" --place-wait "$(pt_slow 30)" \
     >"$PT_WORK/park-stop.out" 2>"$PT_WORK/park-stop.err"
@@ -180,9 +181,13 @@ if pt_up_wait "$RUN" 30 "$up"; then
   fi
   cat "$PT_WORK/park-stop.out"
   pt_check "the runner placed again to resume the arm" \
-    grep -q 'stopped on a reflex while placing: placing again' "$PT_WORK/park-stop.err"
+    grep -q 'stopped on a reflex while placing: placing again at rest' "$PT_WORK/park-stop.err"
   pt_check "the task ran from the park" \
     grep -qE '^task 1/1 .*(reached|timed out|stopped after)' "$PT_WORK/park-stop.out"
+  # Resumed while still braking, the arm would meet its held setpoint in a jump.
+  pt_check_not "no Cartesian acceleration stop on resuming" \
+    bash -c 'tail -n +"$2" "$1" | grep -q "stopped: Cartesian acceleration"' _ "$RUN/bridge.log" \
+    $((n_lines + 1))
   pt_stop_logger
   pt_up_stop "$up" 30
   pt_check "nudge-up run exits 0 after SIGINT (got $PT_RC)" test "$PT_RC" -eq 0
