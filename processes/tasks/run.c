@@ -270,22 +270,23 @@ static int place_once(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, i
                      (int8_t)c->park, c->park_xy[0], c->park_xy[1]};
   const double t0 = ndp_mono();
   double sent = -INFINITY;
-  /* A stop from before this PLACE is acknowledged by it (nudge-bridge resumes the arm). */
-  int said = 0, seen = 0, stopped = io->robot_stopped == 1, acked = 1;
+  int said = 0, seen = 0;
+  /* Stops so far (no task runs while placing): one from before this PLACE is acknowledged
+   * by it, as nudge-bridge resumes the arm on a new PLACE. */
+  int acked = io->stops_between;
   while (!ndp_quit) {
     const double now = ndp_mono();
     /* A reflex stop on the way (the sphere parking or moving clear) holds the arm until a
      * new task or PLACE acknowledges it: a new PLACE, once the arm has braked to rest
      * (STOP_REST), whose park the planner starts afresh from where the sphere stopped. */
-    if (io->robot_stopped == 1 && !stopped) acked = 0;
-    stopped = io->robot_stopped == 1;
-    if (stopped && !acked && now - io->ee_moving_at >= STOP_REST) {
+    if (io->stops_between > acked && io->robot_stopped == 1 &&
+        now - io->ee_moving_at >= STOP_REST) {
       fprintf(stderr, PROG ": the robot stopped on a reflex while placing: placing again at "
               "rest, which resumes it\n");
       m.utime = m.place_id = ndp_utime();
       seen = 0;
       sent = -INFINITY;
-      acked = 1;
+      acked = io->stops_between;
     }
     if (io->frames > 0 && io->last.utime > m.utime && !seen) seen = at_pose(io, g);
     if (seen && (!c->park || parked(io, c))) return 1;

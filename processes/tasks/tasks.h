@@ -146,7 +146,8 @@ typedef struct {
   int robot_stopped;  /* the newest ROBOT_STATE said STOPPED (1) or not (0); -1 before one */
   int stops_between;  /* reflex stops that began while no task ran (a release, idle) */
   double cmd_moving_at; /* ndp_mono() of the newest EE_CMD not HOLDING; -inf before one */
-  double ee_moving_at;  /* ndp_mono() of the newest ROBOT_STATE at REST_SPEED or faster */
+  double ee_moving_at;  /* ndp_mono() of the newest ROBOT_STATE at REST_SPEED or faster;
+                           -inf before one */
 } tasks_io;
 
 /* How one task ended. */

@@ -209,7 +209,8 @@ pt_check "the training goals pushed to are --show-goals' ($drawn against $shown)
       if ((p[1] - q[1]) ^ 2 > 0.0051 ^ 2 || (p[2] - q[2]) ^ 2 > 0.0051 ^ 2) exit 1
       if ((p[3] - q[3] * 180 / atan2(0, -1)) ^ 2 > 0.051 ^ 2) exit 1 }
     exit 0 }'
-fig() { awk -v n="$1" '$1 == n { print $2 }' "$PT_WORK/study.out"; }
+# fig NAME [FILE]: the value of summary line NAME in FILE (default the study's output).
+fig() { awk -v n="$1" '$1 == n { print $2 }' "${2:-$PT_WORK/study.out}"; }
 for f in eval_success_ep0 eval_success_ep2 eval_success_last eval_time_ratio_ep2 \
   eval_time_ratio_last eval_time_ep0 eval_time_ep2 val_loss_ratio_ep2 reflex_stops \
   runs_sliding_within5pct_ep2 torsional_err_drop_pct_last sliding_err_pct_max reflex_stops_robot; do
@@ -247,9 +248,8 @@ pt_check "the five evaluation tasks ran" \
 pt_check "no training push, no refit (the adapter's log holds no refit line)" \
   bash -c 'test -s "$1/logs/adapter.log" && ! test -e "$1/train_ep1.txt" &&
     ! grep -q "^refit version" "$1/logs/adapter.log"' _ "$OUT0/run_0"
-held() { awk -v n="$1" '$1 == n { print $2 }' "$PT_WORK/held.out"; }
-pt_check "eval_time_ep0 is the five tasks' mean ($(held eval_time_ep0) s)" \
-  awk -v t="$(held eval_time_ep0)" '/^task [1-5]\/5 goal/ && match($0, /(in|after) [0-9.]+ s/) {
+pt_check "eval_time_ep0 is the five tasks' mean ($(fig eval_time_ep0 "$PT_WORK/held.out") s)" \
+  awk -v t="$(fig eval_time_ep0 "$PT_WORK/held.out")" '/^task [1-5]\/5 goal/ && match($0, /(in|after) [0-9.]+ s/) {
       split(substr($0, RSTART, RLENGTH), w, " "); s += w[2]; n++ }
     END { exit !(n == 5 && t > 0 && (s / n - t) ^ 2 < 1e-5) }' "$OUT0/run_0/eval_ep0.txt"
 pt_check_not "no figure of a fit or of later episodes" \
