@@ -33,8 +33,9 @@ int main(int argc, char **argv) {
     io.buf = &buf;
   }
   const char *url = ndp_url(cfg.url);
-  int status = 1, ran = 0, reached = 0, attempted = 0, stops = 0, met = 0;
+  int status = 1, ran = 0, reached = 0, attempted = 0, stops = 0, met = 0, moved = 0, pushed = 0;
   double t_sum = 0.0, pos_sum = 0.0, task_s = 0.0, obj_path = 0.0, ee_path = 0.0;
+  double approach_sum = 0.0, push_sum = 0.0;
   int64_t plans = 0;
   static double reach_t[MAX_GOALS], ages[MAX_PLAN_AGES];
   io.ages = ages;
@@ -91,6 +92,9 @@ int main(int argc, char **argv) {
     attempted += !rejected;
     pos_sum += rejected ? 0.0 : r.pos_err;
     if (r.event == NUDGE_EPISODE_T_EVENT_SUCCESS) reach_t[reached++] = r.time, t_sum += r.time;
+    if (r.moved_at >= 0.0) moved++, approach_sum += r.moved_at;
+    if (r.moved_at >= 0.0 && r.event == NUDGE_EPISODE_T_EVENT_SUCCESS)
+      pushed++, push_sum += r.time - r.moved_at;
     stops += r.event == NUDGE_EPISODE_T_EVENT_STOPPED;
     met += r.met_at_start;
     task_s += rejected ? 0.0 : r.time;
@@ -108,6 +112,10 @@ int main(int argc, char **argv) {
     printf("reach_time_mean %.3f s\n", t_sum / reached);
     printf("reach_time_median %.3f s\n", nd_stats_of(reach_t, reached).median);
   }
+  /* Where a task's time goes: until the object first moves (TASKS_MOVED), and from then on
+   * to the goal in the tasks that reached it. */
+  if (moved) printf("approach_time_mean %.3f s\n", approach_sum / moved);
+  if (pushed) printf("push_time_mean %.3f s\n", push_sum / pushed);
   if (attempted) {
     printf("final_pos_err_mean %.4f m\n", pos_sum / attempted);
     printf("object_path_mean %.3f m\nsphere_path_mean %.3f m\n", obj_path / attempted,

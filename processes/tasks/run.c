@@ -116,6 +116,8 @@ int tasks_run(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, const nd_goal *g, in
     tasks_buffer_begin(io->buf, &io->last, id, &goal);
   memset(&io->run, 0, sizeof(io->run));
   io->run.id = id;
+  memcpy(io->run.obj0, io->last.obj_pos, 2 * sizeof(double));
+  io->run.obj0[2] = nd_quat_yaw(io->last.obj_quat);
   const double t0 = ndp_mono();
   if (nudge_task_t_publish(lcm, NDP_CH_TASK, &t) != 0) goto fail;
   io->st.published++;
@@ -171,6 +173,7 @@ int tasks_run(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, const nd_goal *g, in
   r->ee_path = io->run.ee_path;
   r->ee_speed_max = io->run.ee_speed_max;
   r->cmd_speed_max = io->run.cmd_speed_max;
+  r->moved_at = io->run.moved ? io->run.moved_at - t0 : -1.0;
   if (r->interrupted) {
     r->event = NUDGE_EPISODE_T_EVENT_TIMEOUT;
     snprintf(r->reason, sizeof(r->reason), "interrupted: the runner was stopped at %.2f s",
@@ -208,9 +211,11 @@ void tasks_print(int i, int n, const nd_goal *g, const tasks_result *r) {
                        : r->event == NUDGE_EPISODE_T_EVENT_SUCCESS ? "reached in"
                                                                    : "timed out after";
     printf("%s %.2f s, pos err %.3f m, yaw err %.1f deg, %lld plans, object path %.3f m, "
-           "sphere path %.3f m, sphere top speed %.2f m/s, command top speed %.2f m/s\n", what,
+           "sphere path %.3f m, sphere top speed %.2f m/s, command top speed %.2f m/s, ", what,
            r->time, r->pos_err, r->yaw_err * 180.0 / ND_PI, (long long)r->plans, r->obj_path,
            r->ee_path, r->ee_speed_max, r->cmd_speed_max);
+    if (r->moved_at >= 0.0) printf("object moved at %.2f s\n", r->moved_at);
+    else printf("object not moved\n");
   }
   fflush(stdout);
 }

@@ -114,6 +114,11 @@ typedef struct {
  * and a study would count it as an episode's push (decisions#untouched-push). */
 #define TASKS_RECORD_MOVED_MIN 0.01
 
+/* The push begins where the object is first this far (m) off its pose at the task's start,
+ * its turn times REST_ARM counted: fifty times motion capture's 0.1 mm noise, so the time
+ * before it is the approach (the way to the object and the first contact's build-up). */
+#define TASKS_MOVED 0.005
+
 #define MAX_PLAN_AGES 100000 /* plan ages kept for the percentiles: hours of plans */
 
 /* What happened during the running task, as the handlers see it. */
@@ -125,6 +130,9 @@ typedef struct {
   double cmd_speed_max;      /* m/s, the commanded top speed (EE_CMD v) */
   double last_obj[2], last_ee[2];
   int have_last;
+  double obj0[3];     /* the object's (x, y, yaw) at the task's start */
+  int moved;          /* it has moved TASKS_MOVED since */
+  double moved_at;    /* then: the arrival (ndp_mono()) of the first frame that showed it */
   int resumed;        /* ROBOT_STATE has said the robot is not stopped since the task began */
   int stopped;        /* a reflex stopped the robot after that */
   int reflex, reflex_joint;  /* robot_state_t.REFLEX_*, joint 1..7 or 0 */
@@ -162,6 +170,7 @@ typedef struct {
   double obj_path, ee_path;  /* m */
   double ee_speed_max;       /* m/s */
   double cmd_speed_max;      /* m/s */
+  double moved_at;   /* s since the start until the object had moved TASKS_MOVED; -1: never */
   int met_at_start;  /* the goal was met before anything moved: nothing recorded */
   char reason[200];
 } tasks_result;

@@ -21,7 +21,8 @@
 #    loss fell, and the summary lines, summary.csv and (with gnuplot) both figures are
 #    written.
 # 3. --episodes 0: the five evaluation tasks alone at a held theta, no training push and no
-#    refit; eval_time_ep0 is their mean, and no figure of a fit or a later episode is printed.
+#    refit; eval_time_ep0 is their mean, eval_approach_ep0 the mean of the times their object
+#    first moved (each within its task), and no figure of a fit or a later episode is printed.
 set -u
 PT_NAME=test_study
 PT_NO_LOGGER=1
@@ -94,9 +95,9 @@ col() {
     ce && c && $ce == e { print $c }' "$CSV"
 }
 KEYS="slide torsion roll mass box_scale com_x com_y"
-HDR=episode,version,rollouts,${KEYS// /,},${KEYS// /_std,}_std,fit_loss,val_loss,train_reached,train_time,eval_success,eval_time,eval_obj_path,eval_ee_path,reflex_stops
-pt_check "run_0.csv: the header of theta's 7 entries and their stds, and 3 rows of its 26 columns" \
-  awk -F, -v h="$HDR" 'NR == 1 && $0 != h { bad = 1 } NF != 26 { bad = 1 } END { exit bad || NR != 4 }' "$CSV"
+HDR=episode,version,rollouts,${KEYS// /,},${KEYS// /_std,}_std,fit_loss,val_loss,train_reached,train_time,eval_success,eval_time,eval_approach,eval_obj_path,eval_ee_path,reflex_stops
+pt_check "run_0.csv: the header of theta's 7 entries and their stds, and 3 rows of its 27 columns" \
+  awk -F, -v h="$HDR" 'NR == 1 && $0 != h { bad = 1 } NF != 27 { bad = 1 } END { exit bad || NR != 4 }' "$CSV"
 pt_check "versions 0, 1, 2 fitted on 0, 1, 2 rollouts" \
   test "$(col 0 version)$(col 1 version)$(col 2 version)/$(col 0 rollouts)$(col 1 rollouts)$(col 2 rollouts)" = "012/012"
 pt_check "every row has a positive validation loss" \
@@ -212,8 +213,8 @@ pt_check "the training goals pushed to are --show-goals' ($drawn against $shown)
 # fig NAME [FILE]: the value of summary line NAME in FILE (default the study's output).
 fig() { awk -v n="$1" '$1 == n { print $2 }' "${2:-$PT_WORK/study.out}"; }
 for f in eval_success_ep0 eval_success_ep2 eval_success_last eval_time_ratio_ep2 \
-  eval_time_ratio_last eval_time_ep0 eval_time_ep2 val_loss_ratio_ep2 reflex_stops \
-  runs_sliding_within5pct_ep2 torsional_err_drop_pct_last sliding_err_pct_max reflex_stops_robot; do
+  eval_time_ratio_last eval_time_ep0 eval_time_ep2 eval_approach_ep0 eval_approach_ep2 \
+  val_loss_ratio_ep2 reflex_stops runs_sliding_within5pct_ep2 torsional_err_drop_pct_last sliding_err_pct_max reflex_stops_robot; do
   pt_check "summary line $f ($(fig "$f"))" test -n "$(fig "$f")"
 done
 pt_check "eval_time_ratio_ep2 is eval_time_ep2 over eval_time_ep0 ($(fig eval_time_ep2) s, $(fig eval_time_ep0) s)" \
@@ -252,6 +253,15 @@ pt_check "eval_time_ep0 is the five tasks' mean ($(fig eval_time_ep0 "$PT_WORK/h
   awk -v t="$(fig eval_time_ep0 "$PT_WORK/held.out")" '/^task [1-5]\/5 goal/ && match($0, /(in|after) [0-9.]+ s/) {
       split(substr($0, RSTART, RLENGTH), w, " "); s += w[2]; n++ }
     END { exit !(n == 5 && t > 0 && (s / n - t) ^ 2 < 1e-5) }' "$OUT0/run_0/eval_ep0.txt"
+pt_check "each task's approach lies within it, and eval_approach_ep0 is their mean ($(fig \
+  eval_approach_ep0 "$PT_WORK/held.out") s)" \
+  awk -v a="$(fig eval_approach_ep0 "$PT_WORK/held.out")" '/^task [1-5]\/5 goal/ {
+      if (!match($0, /(in|after) [0-9.]+ s/)) exit 1
+      split(substr($0, RSTART, RLENGTH), w, " "); t = w[2]
+      if (!match($0, /object moved at [0-9.]+ s$/)) exit 1
+      split(substr($0, RSTART, RLENGTH), w, " "); m = w[4]
+      if (!(m > 0 && m < t)) bad = 1; s += m; n++ }
+    END { exit bad || !(n == 5 && a > 0 && (s / n - a) ^ 2 < 1e-5) }' "$OUT0/run_0/eval_ep0.txt"
 pt_check_not "no figure of a fit or of later episodes" \
   grep -qE '^(eval_time_ratio|eval_success_(ep2|last)|val_loss|runs_sliding|torsional)' \
   "$PT_WORK/held.out"

@@ -5,7 +5,8 @@
 #
 # 1. `nudge-up demo` on the default chain's first two goals (tau 5 s) with lcm-logger
 #    recording: the task runner exits 0, both tasks ran and at least one reached its goal
-#    (EPISODE events in the log) at the demo's eps 1e-3. The live system reaches the
+#    (EPISODE events in the log) at the demo's eps 1e-3, a moved object first moved
+#    within its task (approach_time_mean their mean). The live system reaches the
 #    chain's 5 and both of these on an idle machine; with the planner starved of CPU
 #    (plans slower than the executor's 0.1 s timeout, so the robot stops and goes) the
 #    first push can time out while the second still succeeds, so one of two is what the
@@ -45,6 +46,17 @@ pt_stop_logger
 cat "$PT_WORK/demo.out"
 
 pt_check "the task runner printed its summary" grep -q '^reached [0-9]*/2 goals' "$PT_WORK/demo.out"
+pt_check "each moved object moved within its task, approach_time_mean their mean" \
+  awk '/^task [12]\/2 goal/ {
+      if (!match($0, /(in|after) [0-9.]+ s/)) exit 1
+      split(substr($0, RSTART, RLENGTH), w, " "); t = w[2]
+      if (/object not moved$/) next
+      if (!match($0, /object moved at [0-9.]+ s$/)) exit 1
+      split(substr($0, RSTART, RLENGTH), w, " ")
+      if (!(w[4] > 0 && w[4] < t)) exit 1
+      s += w[4]; n++ }
+    $1 == "approach_time_mean" { a = $2 }
+    END { exit !(n >= 1 && (s / n - a) ^ 2 <= 0.0051 ^ 2) }' "$PT_WORK/demo.out"  # 2 decimals
 pt_check "EPISODE: both tasks started and ended, at least one reached its goal" \
   pt_lc episodes "$(pt_events "$LOG")" --min-start 2 --min-end 2 --min-success 1
 pt_check "EE_CMD: loop alive (no gap over 0.5 s), steps within v_max dt, a_max dt, j_max dt (also at plan switches)" \
