@@ -3,7 +3,6 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "nd_math.h"
 #include "tasks.h"
 
 #define RATE_QUEUE 1000 /* queue of the 1 kHz channels: a second of them */
@@ -38,11 +37,9 @@ static void use_mocap(void *user, const nudge_mocap_t *m) {
     path_step(&r->obj_path, r->last_obj, m->obj_pos, r->have_last);
     path_step(&r->ee_path, r->last_ee, m->ee_pos, r->have_last);
     r->have_last = 1;
-    if (!r->moved) {
-      const double turn = nd_wrap_angle(nd_quat_yaw(m->obj_quat) - r->obj0[2]);
-      r->moved = hypot(m->obj_pos[0] - r->obj0[0], m->obj_pos[1] - r->obj0[1]) +
-                 REST_ARM * fabs(turn) >= TASKS_MOVED;
-      if (r->moved) r->moved_at = io->t_last;
+    if (!r->moved && tasks_frame_shift(m, &r->start) >= TASKS_MOVED) {
+      r->moved = 1;
+      r->moved_at = io->t_last;
     }
   }
   if (io->buf) {

@@ -116,8 +116,7 @@ int tasks_run(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, const nd_goal *g, in
     tasks_buffer_begin(io->buf, &io->last, id, &goal);
   memset(&io->run, 0, sizeof(io->run));
   io->run.id = id;
-  memcpy(io->run.obj0, io->last.obj_pos, 2 * sizeof(double));
-  io->run.obj0[2] = nd_quat_yaw(io->last.obj_quat);
+  io->run.start = io->last;
   const double t0 = ndp_mono();
   if (nudge_task_t_publish(lcm, NDP_CH_TASK, &t) != 0) goto fail;
   io->st.published++;
@@ -241,13 +240,16 @@ int tasks_pause(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int err
   return 0;
 }
 
+double tasks_frame_shift(const nudge_mocap_t *a, const nudge_mocap_t *b) {
+  const double d = hypot(a->obj_pos[0] - b->obj_pos[0], a->obj_pos[1] - b->obj_pos[1]);
+  const double dyaw = fabs(nd_wrap_angle(nd_quat_yaw(a->obj_quat) - nd_quat_yaw(b->obj_quat)));
+  return fmax(d, REST_ARM * dyaw);
+}
+
 /* The object's speed between frames a and b (older), its yaw rate counted at REST_ARM. */
 static double frame_speed(const nudge_mocap_t *a, const nudge_mocap_t *b) {
   const double dt = 1e-6 * (double)(a->utime - b->utime);
-  if (!(dt > 0.0)) return INFINITY;
-  const double d = hypot(a->obj_pos[0] - b->obj_pos[0], a->obj_pos[1] - b->obj_pos[1]);
-  const double dyaw = fabs(nd_wrap_angle(nd_quat_yaw(a->obj_quat) - nd_quat_yaw(b->obj_quat)));
-  return fmax(d, REST_ARM * dyaw) / dt;
+  return dt > 0.0 ? tasks_frame_shift(a, b) / dt : INFINITY;
 }
 
 /* 1 if the newest frame shows the object within PLACE_POS and PLACE_YAW of g. */

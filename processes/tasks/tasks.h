@@ -114,9 +114,9 @@ typedef struct {
  * and a study would count it as an episode's push (decisions#untouched-push). */
 #define TASKS_RECORD_MOVED_MIN 0.01
 
-/* The push begins where the object is first this far (m) off its pose at the task's start,
- * its turn times REST_ARM counted: fifty times motion capture's 0.1 mm noise, so the time
- * before it is the approach (the way to the object and the first contact's build-up). */
+/* The push begins where the object is first this far (m, tasks_frame_shift) off its pose
+ * at the task's start: fifty times motion capture's 0.1 mm noise, so the time before it is
+ * the approach (the way to the object and the first contact's build-up). */
 #define TASKS_MOVED 0.005
 
 #define MAX_PLAN_AGES 100000 /* plan ages kept for the percentiles: hours of plans */
@@ -130,7 +130,7 @@ typedef struct {
   double cmd_speed_max;      /* m/s, the commanded top speed (EE_CMD v) */
   double last_obj[2], last_ee[2];
   int have_last;
-  double obj0[3];     /* the object's (x, y, yaw) at the task's start */
+  nudge_mocap_t start; /* the frame the task started from */
   int moved;          /* it has moved TASKS_MOVED since */
   double moved_at;    /* then: the arrival (ndp_mono()) of the first frame that showed it */
   int resumed;        /* ROBOT_STATE has said the robot is not stopped since the task began */
@@ -195,6 +195,9 @@ int tasks_wait_mocap(lcm_t *lcm, tasks_io *io, double wait, char *err, int errle
 int tasks_run(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, const nd_goal *g, int64_t id,
               tasks_result *r, char *err, int errlen);
 void tasks_print(int i, int n, const nd_goal *g, const tasks_result *r);
+/* How far (m) the object is in frame a from where it is in frame b: the larger of its
+ * travel and its turn times REST_ARM. */
+double tasks_frame_shift(const nudge_mocap_t *a, const nudge_mocap_t *b);
 /* What a ROBOT_STATE reflex code names: "joint 4 velocity", "Cartesian jerk". */
 const char *tasks_reflex_name(int reflex, int joint);
 /* After a task: await the fit of its record (--await-fit). */
