@@ -39,7 +39,9 @@
  *   sampled the optimum does not draw as widely again (doc/decisions.md#step-gate).
  * - std_floor (in units of sigma0) and rel_floor (of the mean, at the start of each refit)
  *   keep a warm-started fit able to move when a new rollout shifts the optimum
- *   (doc/decisions.md#step-std). */
+ *   (doc/decisions.md#step-std). A signed parameter's mean may sit at 0, where rel_floor
+ *   gives nothing: shift_floor (in sigma0, off by default) restarts it instead
+ *   (doc/decisions.md#shift-restart). */
 #define NDS_FIT_STD_FLOOR 0.25
 #define NDS_FIT_MODE_DEFAULT NDS_REPLAY_FORCE
 #define NDS_FIT_WINDOW 0.005
@@ -141,6 +143,8 @@ int nds_fit_cfg_check(const nds_fit_cfg *c, char *err, int errlen) {
   else if (!(isfinite(c->step_gate) && c->step_gate >= 0)) bad = "step_gate must be finite and >= 0";
   else if (!(isfinite(c->rel_floor) && c->rel_floor >= 0 && c->rel_floor < 1))
     bad = "rel_floor must be in [0, 1)";
+  else if (!(isfinite(c->shift_floor) && c->shift_floor >= 0 && c->shift_floor <= 16))
+    bad = "shift_floor must be in [0, 16]";
   else if (nds_replay_cfg_check(&c->replay, rerr, sizeof(rerr)))
     bad = rerr;
   else if (c->replay.phase != 0)
@@ -650,11 +654,14 @@ int nds_fit_run(nds_fit *f, const nd_rollout *rs, int n, nds_fit_out *out, char 
   memcpy(m0, nd_cem_mean(f->cem), sizeof(double) * f->nfit);
   memcpy(s0, nd_cem_std(f->cem), sizeof(double) * f->nfit);
   nd_rng r0 = f->rng;
-  if (f->cfg.rel_floor > 0) {
+  if (f->cfg.rel_floor > 0 || f->cfg.shift_floor > 0) {
     double xs[ND_NTHETA];
     for (int j = 0; j < f->nfit; j++) {
+      const int i = f->idx[j];
       const double th = nds_fit_th(f, j, m0[j]);
-      xs[j] = fmax(s0[j], nds_fit_xstd(f, j, th, f->cfg.rel_floor * fabs(th)));
+      const double lo = fmax(f->cfg.rel_floor * fabs(th),
+                             nd_theta_signed(i) ? f->cfg.shift_floor * f->cfg.sigma0[i] : 0);
+      xs[j] = fmax(s0[j], nds_fit_xstd(f, j, th, lo));
     }
     nd_cem_set_dist(f->cem, m0, xs);
   }

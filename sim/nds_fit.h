@@ -64,6 +64,8 @@ typedef struct {
   double step_gate;            /* nd_cem's step_gate (step_std only for steps >= this many
                                   stds; 0: every step) */
   double rel_floor;            /* each run starts with std >= rel_floor |mean| (0: off) */
+  double shift_floor;          /* and a signed parameter's (the box's shift, whose mean may
+                                  be 0) with std >= shift_floor * sigma0 (0: off) */
   double k1, k2;               /* weights of L_pos,ee (1) and L_rot,o (m^2/rad) */
   double robust;               /* m^2; > 0: CEM ranks candidates by the windows' robust
                                   score of this scale (nds_replay_bounded); 0: by L, the

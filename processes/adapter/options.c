@@ -111,6 +111,10 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
                "replay options above, print its loss L and L's terms summed over the rollouts "
                "as 'name value unit' lines and exit (a validation loss on held-out rollouts, "
                "as nudge-study uses it)"},
+      {"shift-restart", ND_OPT_DOUBLE, &fc->shift_floor, 0, 16, .arg = "K",
+       .help = "each refit starts the box's centre-of-mass shifts' std at K prior stds or "
+               "more, so that a refit warm-started from a narrowed distribution can still "
+               "move them (0: off; the std never falls below 0.25 prior stds anyway)"},
       {"pop", ND_OPT_INT, &fc->pop, 2, 4096, .arg = "Q",
        .help = "CEM population Q (the paper's 32)"},
       {"iters", ND_OPT_INT, &fc->iters, 1, NDS_FIT_MAX_ITERS, .arg = "C",

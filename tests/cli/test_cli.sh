@@ -207,6 +207,7 @@ bad nudge-bridge "--ee 0.7,0 starts outside the workspace" --ee 0.7,0
 bad nudge-bridge "--ee -0.1,0 starts outside the workspace|(--workspace)" --workspace 0,0,0.5,0.5
 
 bad nudge-adapter "--threads|out of range" --replay-window 0 --threads 0
+bad nudge-adapter "--shift-restart|out of range" --buffer x.nrb --shift-restart 17
 bad nudge-adapter "--fit|unknown parameter 'friction'" --fit slide,friction
 bad nudge-adapter "--fit|'slide' given twice" --fit slide,slide
 bad nudge-adapter "--fit|no parameter" --fit ,
@@ -433,7 +434,7 @@ args_are nudge-bridge --workspace "$LAB" --world lab
 args_are nudge-executor --workspace "$LAB" --v-max 0.65 --a-max 2.8 --brake-a-max 2.0
 args_are nudge-planner --workspace "$LAB" --v-max 0.6 --a-max 2.5 --segment-time 0.6 --arrival 0.8 --prox-way round --arm panda --arm-load 0.9 --pop 16
 args_are nudge-tasks --record "$W/lab.nrb" --world lab --eps 1e-3 --record-control velocity
-args_are nudge-adapter --replay-mode velocity --fit slide,torsion,mass,com_x,com_y --replay-window 0.6 --buffer "$W/lab.nrb"
+args_are nudge-adapter --replay-mode velocity --fit slide,torsion,mass,com_x,com_y --replay-window 0.6 --shift-restart 1 --buffer "$W/lab.nrb"
 rm -f "$W"/*.args
 "$FAKE/nudge-up" demo --world lab --workspace "$WS" --lcm-url memq:// --log-dir "$W/logs-lab2" \
   --buffer "$W/lab.nrb" --grace 2 --ready-timeout 5 >"$W/up-lab2.out" 2>"$W/up-lab2.err"

@@ -968,6 +968,28 @@ static void test_fit_com(void **state) {
   assert_near(out.mean[ND_TH_BOX_SCALE], 1, 0);  /* held */
   nds_fit_free(f);
 
+  /* A warm start that narrowed on a short shift (2 mm, 0, at the std floor) moves little in
+   * one refit; restarted at a prior std (shift_floor 1) the same refit gets a millimetre
+   * or more closer. */
+  double err_at[2];
+  for (int k = 0; k < 2; k++) {
+    nds_fit_cfg wc = cfg;
+    wc.shift_floor = k;
+    f = nds_fit_create(&nm, &wc, pool, err, sizeof(err));
+    assert_non_null(f);
+    double m[ND_NTHETA], sd[ND_NTHETA] = {0};
+    memcpy(m, cfg.mu0, sizeof(m));
+    m[ND_TH_COM_X] = 0.002;
+    sd[ND_TH_COM_X] = sd[ND_TH_COM_Y] = wc.std_floor * wc.sigma0[ND_TH_COM_X];
+    assert_int_equal(nds_fit_set_dist(f, m, sd, err, sizeof(err)), 0);
+    assert_int_equal(nds_fit_run(f, rs, NPUSH, &out, err, sizeof(err)), 0);
+    err_at[k] = hypot(out.mean[ND_TH_COM_X] - 0.008, out.mean[ND_TH_COM_Y] + 0.004);
+    printf("shift_floor %d: com %.2f %.2f mm after one refit from (2, 0) mm at std %.3f mm\n",
+           k, 1e3 * out.mean[ND_TH_COM_X], 1e3 * out.mean[ND_TH_COM_Y], 1e3 * sd[ND_TH_COM_X]);
+    nds_fit_free(f);
+  }
+  assert_true(err_at[1] < err_at[0] - 0.001);
+
   /* A shift is not searched as a log, and its bound must be a real one. */
   nds_fit_cfg bad = cfg;
   bad.logfit[ND_TH_COM_X] = 1;
@@ -1446,6 +1468,8 @@ static void test_fit_bad_config(void **state) {
   BAD("step_std", c->step_std = -1);
   BAD("step_gate", c->step_gate = NAN);
   BAD("rel_floor", c->rel_floor = 1);
+  BAD("shift_floor", c->shift_floor = -0.5);
+  BAD("shift_floor", c->shift_floor = NAN);
   BAD("replay.window", c->replay.window = NAN);
   BAD("replay.window", c->replay.window = -0.1);
   BAD("replay.smooth", c->replay.smooth = NAN);
