@@ -5,7 +5,7 @@
  * and summing the rollouts' L = L_pos,o + k1 L_pos,ee + k2 L_rot,o. The optimiser is the
  * project's nd_cem in its plain configuration: white Gaussian noise per parameter, no
  * elites kept, no population decay, no momentum, no injected mean; only a floor on the std
- * (std_floor, rel_floor) and a std that follows the mean's long steps (step_std,
+ * (std_floor, rel_floor, shift_floor) and a std that follows the mean's long steps (step_std,
  * step_gate; nds_fit.c says why). Kept elites would carry costs measured on an older
  * buffer into the next refit, and with C = 2 the extra evaluations buy little.
  *
