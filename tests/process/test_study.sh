@@ -6,7 +6,7 @@
 # 1. Bad arguments are refused with status 2 and a message naming the input, before
 #    anything starts; a results directory that holds a study is refused (status 1).
 #    Each world's training goals (--show-goals) repeat under one seed, differ under another
-#    and lie in its ring and yaw range.
+#    and lie in its ring, yaw range and x range (on the lab none behind the start).
 # 2. One run of two episodes from sliding and torsional friction half the truth's: every episode's row
 #    is there, theta's seven entries and their stds in their columns (the four given
 #    completed with the box's neutral 1, 0, 0, which the fit, not fitting them, keeps),
@@ -60,9 +60,9 @@ refused 2 "--show-goals" --show-goals 0
 pt_check_not "nothing was started or written for refused arguments" test -e "$PT_WORK/x/config.txt"
 
 # --- 1b. training goals ------------------------------------------------------------------
-# goals_in WORLD RMIN YMIN YMAX XMAX: 4 runs x 25 of the world's goals, the same on a second
-# call, differing under another seed, each RMIN-0.15 m from the origin (0.5 mm for rounding),
-# turned YMIN-YMAX rad and within |x| <= XMAX.
+# goals_in WORLD RMIN YMIN YMAX XMIN XMAX: 4 runs x 25 of the world's goals, the same on a
+# second call, differing under another seed, each RMIN-0.15 m from the origin (0.5 mm for
+# rounding), turned YMIN-YMAX rad and with x in [XMIN, XMAX].
 goals_in() {
   local w=$1 a b c
   a=$("$STUDY" --world "$w" --runs 4 --show-goals 25)
@@ -70,15 +70,15 @@ goals_in() {
   c=$("$STUDY" --world "$w" --runs 4 --show-goals 25 --seed 2)
   pt_check "$w training goals: the same for the same seed" test -n "$a" -a "$a" = "$b"
   pt_check "$w training goals: others for another seed" test "$a" != "$c"
-  pt_check "$w training goals: 100 of them, $2-0.15 m out, |yaw| $3-$4 rad, |x| <= $5 m" \
-    awk -v r0="$2" -v y0="$3" -v y1="$4" -v x1="$5" '
+  pt_check "$w training goals: 100 of them, $2-0.15 m out, |yaw| $3-$4 rad, x $5 to $6 m" \
+    awk -v r0="$2" -v y0="$3" -v y1="$4" -v x0="$5" -v x1="$6" '
       { for (i = 3; i <= NF; i++) { split($i, g, ","); n++; r = sqrt(g[1] ^ 2 + g[2] ^ 2)
-          y = g[3] < 0 ? -g[3] : g[3]; x = g[1] < 0 ? -g[1] : g[1]
-          if (r < r0 - 5e-4 || r > 0.1505 || y < y0 || y > y1 || x > x1) bad++ } }
+          y = g[3] < 0 ? -g[3] : g[3]
+          if (r < r0 - 5e-4 || r > 0.1505 || y < y0 || y > y1 || g[1] < x0 || g[1] > x1) bad++ } }
       END { exit !(n == 100 && bad == 0) }' <<<"$a"
 }
-goals_in ideal 0.08 0 0.4 0.15
-goals_in lab 0.12 0.2 0.5 0.12
+goals_in ideal 0.08 0 0.4 -0.15 0.15
+goals_in lab 0.12 0.2 0.5 -0.05 0.12
 
 # --- 2. one run, two episodes ------------------------------------------------------------
 OUT=$PT_WORK/study
