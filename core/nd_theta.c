@@ -13,7 +13,7 @@ const char *const nd_theta_name[ND_NTHETA] = {
     "box mass scale",   "box COM shift x",    "box COM shift y"};
 const char *const nd_theta_key[ND_NTHETA] = {"slide",     "torsion", "roll", "mass",
                                              "box_scale", "com_x",   "com_y"};
-const char *const nd_theta_unit[ND_NTHETA] = {"", "m", "m", "kg", "", "m", "m"};
+const char *const nd_theta_unit[ND_NTHETA] = {"1", "m", "m", "kg", "1", "m", "m"};
 
 int nd_theta_signed(int i) { return i == ND_TH_COM_X || i == ND_TH_COM_Y; }
 

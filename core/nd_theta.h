@@ -39,8 +39,8 @@ extern const char *const nd_theta_name[ND_NTHETA];
  * options and CSV columns. */
 extern const char *const nd_theta_key[ND_NTHETA];
 
-/* Units ("", "m", "m", "kg", "", "m", "m"): MuJoCo's torsional and rolling coefficients
- * are lengths. */
+/* Units ("1", "m", "m", "kg", "1", "m", "m"; "1": dimensionless, as the SI writes it):
+ * MuJoCo's torsional and rolling coefficients are lengths. */
 extern const char *const nd_theta_unit[ND_NTHETA];
 
 /* 1 for an entry that may be negative (the centre-of-mass shifts), 0 for one that may not. */

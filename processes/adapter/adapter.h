@@ -6,6 +6,7 @@
  *   fitter.c  the fit thread: one nds_fit_run per job
  *   params.c  a finished fit: the next version, the history, PARAMS
  *   score.c   --score: one replay of the whole buffer at a given theta, no LCM
+ *   offline.c --offline: the watching loop's refits on a recorded buffer, no LCM
  *
  * The adapter watches the replay buffer the task runner appends to. Whenever complete
  * rollouts beyond those of the last fit are there, it refits theta on all of them, or on
@@ -51,6 +52,7 @@ typedef struct {
   double robust;              /* m^2: CEM ranks by the robust score; 0: by L (nds_fit.h) */
   int max_rollouts;           /* refits use the newest this many rollouts; 0: all */
   double score[ND_NTHETA];    /* --score: theta to evaluate; NAN: watch and refit */
+  int offline;                /* --offline: refit once per recorded rollout, then exit */
 } adapter_opts;
 
 /* The fit thread's job and result. Fields under mu. */
@@ -113,6 +115,11 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc);
  * lines; the exit status (0, 1 unreadable or failed). */
 int adapter_score(const adapter_opts *o, const nds_fit_cfg *fc);
 
+/* offline.c: the refits the watching adapter would make on o->buffer as it grew by one
+ * rollout at a time, each line printed as it prints them, then the last fit as 'name
+ * value unit' lines; the exit status (0, 1 unreadable or failed). */
+int adapter_offline(const adapter_opts *o, const nds_fit_cfg *fc);
+
 /* watch.c */
 void adapter_poll(adapter *a);            /* read what was appended (no fit running) */
 void adapter_close(adapter *a);           /* close the buffer, drop its records */
@@ -131,6 +138,8 @@ void adapter_banner(const adapter *a, const nds_fit *fit, const nds_fit_cfg *fc,
                     const nd_history_summary *hs);
 int adapter_publish(adapter *a);          /* PARAMS of the latest fit; -1 on failure */
 void adapter_collect(adapter *a, adapter_fitter *ft);  /* take a finished fit */
+/* The refit line on stdout: version, rollouts fitted (n of the total read), time, out. */
+void adapter_print_refit(int64_t version, int n, int total, double secs, const nds_fit_out *out);
 int adapter_resume(adapter *a, nds_fit *fit, const double sigma0[ND_NTHETA],
                    const nd_history_summary *hs, char *err, int errlen);
 void adapter_quit_during_fit(adapter *a);

@@ -47,6 +47,7 @@ int main(int argc, char **argv) {
   const int rc = adapter_options(argc, argv, &o, &fc);
   if (rc != ND_OPT_RUN) return rc;
   if (!isnan(o.score[0])) return adapter_score(&o, &fc);
+  if (o.offline) return adapter_offline(&o, &fc);
 
   ndp_signals();
   ndp_mujoco_handlers(PROG);

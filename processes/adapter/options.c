@@ -111,6 +111,13 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
                "replay options above, print its loss L and L's terms summed over the rollouts "
                "as 'name value unit' lines and exit (a validation loss on held-out rollouts, "
                "as nudge-study uses it)"},
+      {"offline", ND_OPT_FLAG, &o->offline,
+       .help = "do not watch: refit as the watching adapter would have while the buffer grew "
+               "one rollout at a time (on its first 1, 2, ... rollouts, or the newest "
+               "--max-rollouts), each refit warm-started from the last; print each refit's "
+               "line, then the last one's loss and theta as 'name value unit' lines, and exit. "
+               "No history, no LCM: a recorded buffer refitted with other options, as "
+               "doc/study.md#refit does a study's"},
       {"shift-restart", ND_OPT_DOUBLE, &fc->shift_floor, 0, 16, .arg = "K",
        .help = "each refit starts the box's centre-of-mass shifts' std at K prior stds or "
                "more, so that a refit warm-started from a narrowed distribution can still "
@@ -138,11 +145,14 @@ int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc) {
                       "A restarted adapter goes on from its history: version numbers and the "
                       "CEM distribution continue.",
                       "stdout: one line per refit (--score: its figures). Exit status: 0 after "
-                      "SIGINT/SIGTERM (--score: scored), 1 on a runtime failure\n(history "
-                      "locked by another adapter, unreadable), 2 on bad arguments.\n", opts, sizeof(opts) / sizeof(opts[0])};
+                      "SIGINT/SIGTERM (--score: scored; --offline: refitted), 1 on a runtime "
+                      "failure\n(history locked by another adapter, unreadable), 2 on bad "
+                      "arguments.\n", opts, sizeof(opts) / sizeof(opts[0])};
   int rc = nd_opt_parse(&spec, argc, argv);
   if (rc != ND_OPT_RUN) return rc;
   if (!o->buffer) return nd_opt_fail(&spec, "--buffer FILE is required");
+  if (o->offline && !isnan(o->score[0]))
+    return nd_opt_fail(&spec, "--offline and --score: one or the other");
   const int n = history ? snprintf(o->history, sizeof(o->history), "%s", history)
                         : snprintf(o->history, sizeof(o->history), "%s.history", o->buffer);
   if (n < 0 || n >= (int)sizeof(o->history) || strlen(o->buffer) >= ND_RFILE_PATH_MAX)

@@ -23,6 +23,19 @@ int adapter_publish(adapter *a) {
   return 0;
 }
 
+void adapter_print_refit(int64_t version, int n, int total, double secs, const nds_fit_out *out) {
+  char mean[200], std[200], of[48] = "";
+  nd_theta_str(out->mean, " ", mean, sizeof(mean));
+  nd_theta_str(out->std, " ", std, sizeof(std));
+  if (n < total) snprintf(of, sizeof(of), " (the newest of %d)", total);
+  printf("refit version %lld: %d rollout(s)%s in %.2f s, loss %.4g%s%s%s, theta %s, std %s\n",
+         (long long)version, n, of, secs, out->loss_mean,
+         out->diverged_mean ? " (mean diverged on some)" : "",
+         out->flat ? " (flat: the rollouts do not tell the candidates apart; theta kept)" : "",
+         out->scan_moved ? " (moved by the scan)" : "", mean, std);
+  fflush(stdout);
+}
+
 /* Take a finished fit: new version, history, PARAMS, a line on stdout. */
 void adapter_collect(adapter *a, adapter_fitter *ft) {
   pthread_mutex_lock(&ft->mu);
@@ -67,16 +80,7 @@ void adapter_collect(adapter *a, adapter_fitter *ft) {
   a->covered = a->total;
   a->failed_n = 0;
   a->st.state = "idle";
-  char mean[200], std[200];
-  nd_theta_str(e.mean, " ", mean, sizeof(mean));
-  nd_theta_str(e.std, " ", std, sizeof(std));
-  char of[48];
-  printf("refit version %lld: %d rollout(s)%s in %.2f s, loss %.4g%s%s%s, theta %s, std %s\n",
-         (long long)e.version, n, adapter_window_note(a, of, sizeof(of)), secs, e.loss,
-         out.diverged_mean ? " (mean diverged on some)" : "",
-         out.flat ? " (flat: the rollouts do not tell the candidates apart; theta kept)" : "",
-         out.scan_moved ? " (moved by the scan)" : "", mean, std);
-  fflush(stdout);
+  adapter_print_refit(e.version, n, a->total, secs, &out);
   if (adapter_publish(a))
     fprintf(stderr, PROG ": publishing on %s failed\n", NDP_CH_PARAMS);
 }

@@ -12,7 +12,8 @@
 #    a newer format version (it says so once and keeps polling), damaged in the middle or
 #    torn at the end (it fits the records before the damage and says where they stop);
 #    a reader never changes the file. With --max-rollouts it fits the newest only, and
-#    a restart does not refit the records its history covers.
+#    a restart does not refit the records its history covers; --offline refits once per
+#    record, the window kept, and leaves the buffer and the history as they were.
 # 3. nudge-adapter's history of the wrong kind, not a record file, or damaged before valid
 #    entries: exit 1 naming the file, file untouched; a torn tail: cut off, reported, the
 #    adapter resumes from the entries before it.
@@ -141,6 +142,22 @@ sleep 0.5
 pt_check "--max-rollouts 2: the restart starts no refit on what its history covers" \
   bash -c "! grep -q 'refitting on' '$W/win2.err' && test ! -s '$W/win2.out'"
 stop_adapter
+# --offline on that buffer: one refit per record, as if it had arrived alone, the window
+# kept; the file untouched.
+cp "$W/win.nbuf" "$W/win.keep"
+cp "$W/win.nbuf.history" "$W/winh.keep"
+"$BIN/nudge-adapter" --buffer "$W/win.nbuf" --max-rollouts 2 --threads 1 --offline \
+  >"$W/off.out" 2>"$W/off.err"
+PT_RC=$?
+pt_check "--offline: exit 0 (got $PT_RC), refits on 1, 2, the newest 2 of 3 and of 4, then 'refits 4 count'" \
+  bash -c 'test "$1" -eq 0 && grep -q "^refit version 1: 1 rollout(s) in" "$2" &&
+    grep -q "^refit version 2: 2 rollout(s) in" "$2" &&
+    grep -q "^refit version 3: 2 rollout(s) (the newest of 3) in" "$2" &&
+    grep -q "^refit version 4: 2 rollout(s) (the newest of 4) in" "$2" &&
+    test "$(grep -c "^refit version" "$2")" -eq 4 && grep -qx "refits 4 count" "$2"' _ "$PT_RC" "$W/off.out"
+pt_check "--offline: the buffer and its history are untouched" \
+  bash -c 'cmp -s "$1" "$2" && cmp -s "$3" "$4"' _ "$W/win.nbuf" "$W/win.keep" \
+  "$W/win.nbuf.history" "$W/winh.keep"
 
 # The buffer replaced under the adapter (a new run's file moved into place): it drops the
 # old rollouts and fits the new file's.
@@ -168,6 +185,10 @@ stop_adapter
 pt_check "missing buffer: exit 0 on SIGINT (got $PT_RC)" test "$PT_RC" -eq 0
 
 printf 'x,y\n1,2\n' >"$W/text.nrb"
+"$BIN/nudge-adapter" --buffer "$W/text.nrb" --offline >/dev/null 2>"$W/offtext.err"
+PT_RC=$?
+pt_check "--offline on a text file: exit 1 (got $PT_RC) naming it" \
+  bash -c 'test "$1" -eq 1 && grep -qF "$3: not a nudge record file" "$2"' _ "$PT_RC" "$W/offtext.err" "$W/text.nrb"
 adapter text --buffer "$W/text.nrb"
 said "$W/text.err" "$W/text.nrb: not a nudge record file" 10 || pt_fail "text buffer: not named as 'not a nudge record file'"
 sleep 0.5

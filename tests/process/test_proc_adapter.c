@@ -11,6 +11,10 @@
  *    version it had reached (>= 2, so a refit from scratch, version 1, cannot pass for
  *    it) without refitting, and the next task gives the version after.
  *    The supervisor restarts the killed adapter (its backoff), as it would in use.
+ * 3. `nudge-adapter --offline` with the options nudge-up gave the adapter refits the
+ *    recorded buffer once per rollout: versions 1 and 2, made before the kill, come out
+ *    with the very thetas the live adapter logged, and its last lines give the last theta.
+ *    With --score too, or on a buffer that is not there, it refuses, naming the input.
  *
  * Runs under tests/netns-run, which provides the private namespaces and LCM_DEFAULT_URL
  * (and reports 77, skipped, where namespaces cannot be made). Ends by itself: every wait
@@ -280,6 +284,81 @@ static void killed_adapter_resumes(void **state) {
   assert_int_equal(W.buffer_size, n);
 }
 
+/* Run a shell command line; its exit status (-1 if it did not run or was killed). */
+static int shell(const char *cmd) {
+  const int st = system(cmd);
+  return st != -1 && WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+}
+
+/* The text after "theta " on the line of refit version v in file path, up to ", std";
+ * 1 when found. */
+static int refit_theta(const char *path, int v, char *theta, int len) {
+  char want[48], line[2048];
+  snprintf(want, sizeof(want), "refit version %d: ", v);
+  FILE *f = fopen(path, "r");
+  if (!f) return 0;
+  int found = 0;
+  while (!found && fgets(line, sizeof(line), f)) {
+    const char *p = strstr(line, want), *t = p ? strstr(p, ", theta ") : NULL;
+    const char *e = t ? strstr(t, ", std ") : NULL;
+    if (!e) continue;
+    snprintf(theta, len, "%.*s", (int)(e - t - 8), t + 8);
+    found = 1;
+  }
+  fclose(f);
+  return found;
+}
+
+static void offline_repeats_the_live_refits(void **state) {
+  if (W.version < 3) killed_adapter_resumes(state);
+  const int n = buffer_count();
+  free_rollouts();
+  assert_true(n >= 3);
+  char cmd[2400], out[400], live[400];
+  snprintf(live, sizeof(live), "%s/run/adapter.log", W.dir);
+  snprintf(out, sizeof(out), "%s/offline.out", W.dir);
+  /* The options nudge-up started the adapter with: the first line of its log. */
+  snprintf(cmd, sizeof(cmd),
+           "'%s/nudge-adapter' $(sed -n '1s/.*: starting nudge-adapter //p' '%s') --offline "
+           ">'%s' 2>'%s/offline.err'", W.bin, live, out, W.dir);
+  assert_int_equal(shell(cmd), 0);
+  for (int v = 1; v <= 2; v++) {
+    char a[256], b[256];
+    assert_true(refit_theta(live, v, a, sizeof(a)));
+    assert_true(refit_theta(out, v, b, sizeof(b)));
+    assert_string_equal(b, a);
+  }
+  /* One refit per rollout, the last on all of them, and its theta as name value unit
+   * lines: the slide entry as printed on the line, to its 6 digits. */
+  char last[256], want[64];
+  assert_true(refit_theta(out, n, last, sizeof(last)));
+  assert_false(refit_theta(out, n + 1, last + 128, 64));
+  snprintf(cmd, sizeof(cmd),
+           "grep -q '^refit version %d: %d rollout(s) in' '%s' && grep -qx 'refits %d count' '%s'",
+           n, n, out, n, out);
+  assert_int_equal(shell(cmd), 0);
+  snprintf(want, sizeof(want), "%.6g", strtod(last, NULL));
+  snprintf(cmd, sizeof(cmd),
+           "awk '$1 == \"theta_slide\" && $3 == \"1\" { printf \"%%.6g\", $2 }' '%s' | "
+           "grep -qx '%s'", out, want);
+  assert_int_equal(shell(cmd), 0);
+
+  /* Refusals name what is wrong: the exit status, then the message. */
+  char err[400];
+  snprintf(err, sizeof(err), "%s/refused.err", W.dir);
+  snprintf(cmd, sizeof(cmd),
+           "'%s/nudge-adapter' --buffer '%s' --offline --score 1,0.005,0.0001,1 2>'%s'", W.bin,
+           W.buffer, err);
+  assert_int_equal(shell(cmd), 2);
+  snprintf(cmd, sizeof(cmd), "grep -q -- '--offline and --score' '%s'", err);
+  assert_int_equal(shell(cmd), 0);
+  snprintf(cmd, sizeof(cmd), "'%s/nudge-adapter' --buffer '%s/none.nrb' --offline 2>'%s'",
+           W.bin, W.dir, err);
+  assert_int_equal(shell(cmd), 1);
+  snprintf(cmd, sizeof(cmd), "grep -q 'none.nrb' '%s'", err);
+  assert_int_equal(shell(cmd), 0);
+}
+
 /* SIGINT to the supervisor (it stops the processes in order); SIGKILL after 20 s (times
  * NUDGE_SLOW).
  * Return its exit status. */
@@ -389,6 +468,7 @@ int main(int argc, char **argv) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(one_task_one_record_one_version),
       cmocka_unit_test(killed_adapter_resumes),
+      cmocka_unit_test(offline_repeats_the_live_refits),
   };
   return cmocka_run_group_tests(tests, setup, teardown);
 }
