@@ -21,13 +21,15 @@
 #    These runs are under umask 000: nothing in the log directory may be world-writable,
 #    and the processes must inherit a umask without o+w.
 # 4. nudge-spy passes its arguments to java (a stand-in) literally.
+# 5. nudge-refit refuses bad arguments, and passes the options after -- to nudge-adapter
+#    (a stand-in) literally, after the ones the study's adapter was started with.
 set -u
 PT_NAME=test_cli
 . "$(dirname "${BASH_SOURCE[0]}")/../tools/process-lib.sh"
 
 BUILD=${1:?usage: test_cli.sh BUILD_DIR}
 BIN=$(cd "$BUILD/bin" && pwd) || exit 1
-for p in bridge executor planner adapter tasks status demo experiment bench calibrate up spy; do
+for p in bridge executor planner adapter tasks status demo experiment bench calibrate up spy refit; do
   [[ -x $BIN/nudge-$p ]] || { echo "test_cli: $BIN/nudge-$p is missing: build first" >&2; exit 1; }
 done
 PT_WORK=$(mktemp -d "${TMPDIR:-/tmp}/nudge-test_cli.XXXXXX") || exit 1
@@ -481,6 +483,46 @@ tail3=("${jargs[@]: -3}")
 pt_check "nudge-spy passed its arguments to lcm-spy literally" \
   test "${tail3[0]}" = "--lcm-url=$SPY_URL" -a "${tail3[1]}" = "${EVIL[1]}" -a "${tail3[2]}" = "${EVIL[2]}"
 pt_check "nudge-spy ran nothing else (no pwned* file)" test -z "$(find "$W" -name 'pwned[0-9]')"
+
+# --- 5. nudge-refit ----------------------------------------------------------------------
+
+help nudge-refit
+bad nudge-refit "--study needs a value" --study
+bad nudge-refit "--study DIR is required" --csv x.csv
+bad nudge-refit "unknown argument: --frob" --frob
+bad nudge-refit "holds no nudge-study results" --study "$W/none"
+# A study of one run, one episode, and a stand-in adapter that records each call's argv.
+ST="$W/study;\$(touch $W/pwned8)"
+mkdir -p "$ST/run_0/logs" "$W/refit-bin"
+printf 'replay_mode force\nfit slide\n' >"$ST/config.txt"
+printf 'episode,slide,val_loss\n1,1,2e-05\n' >"$ST/run_0.csv"
+echo x >"$ST/run_0/train.nrb"
+echo x >"$ST/run_0/val.nrb"
+echo "=== t: starting nudge-adapter --fit slide --pop 8" >"$ST/run_0/logs/adapter.log"
+cat >"$W/refit-bin/nudge-adapter" <<'EOF'
+#!/usr/bin/env bash
+case " $* " in
+  *" --offline "*) printf '%s\0' "$@" >"$FAKE_OUT/adapter.args"
+    echo "refit version 1: 1 rollout(s) in 0.1 s, loss 1e-05, theta 1 0.005 0.0001 1 1 0 0, std 0 0 0 0 0 0 0" ;;
+  *" --score "*) echo "loss 2e-05 m^2" ;;
+esac
+EOF
+chmod 755 "$W/refit-bin/nudge-adapter"
+FAKE_OUT=$W "$BIN/nudge-refit" --study "$ST" --bin-dir "$W/refit-bin" -- "${EVIL[@]:0:9}" \
+  >"$W/refit.out" 2>"$W/refit.err"
+rc=$?
+pt_check "nudge-refit ran on the stand-in (status $rc)" test "$rc" -eq 0
+pt_check "nudge-refit printed the ratio of equal losses, 1" \
+  grep -qx "val_loss_ratio_ep1 1.000 ratio (geometric mean of 1 runs)" "$W/refit.out"
+# The --offline call: the logged options, the buffer, --offline, then the given ones.
+mapfile -d '' -t aargs <"$W/adapter.args"
+pt_check "nudge-refit passed the logged options and then the given ones literally" \
+  bash -c 'a=("$@"); want=(--fit slide --pop 8 --buffer "$0/run_0/train.nrb" --offline)
+    n=${#want[@]}; ((${#a[@]} == n + 9)) || exit 1
+    for ((i = 0; i < n; i++)); do [[ ${a[i]} == "${want[i]}" ]] || exit 1; done
+    [[ ${a[n]} == "0.5;touch "* && ${a[n + 1]} == "a b  c" && ${a[n + 4]} == "*" && ${a[n + 5]} == "" ]]' \
+  "$ST" "${aargs[@]}"
+pt_check "nudge-refit ran nothing else (no pwned* file)" test -z "$(find "$W" -name 'pwned[0-9]')"
 
 pt_figure cli_cases "$NCASES" count
 if ((PT_FAILS)); then

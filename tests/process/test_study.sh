@@ -23,6 +23,9 @@
 # 3. --episodes 0: the five evaluation tasks alone at a held theta, no training push and no
 #    refit; eval_time_ep0 is their mean, eval_approach_ep0 the mean of the times their object
 #    first moved (each within its task), and no figure of a fit or a later episode is printed.
+# 4. nudge-refit on the study of 2: with no adapter option it repeats each episode's theta
+#    and validation loss exactly (ratio 1, no run lower); another CEM seed gives other
+#    thetas; bad arguments are refused with status 2 naming the input.
 set -u
 PT_NAME=test_study
 PT_NO_LOGGER=1
@@ -265,6 +268,40 @@ pt_check "each task's approach lies within it, and eval_approach_ep0 is their me
 pt_check_not "no figure of a fit or of later episodes" \
   grep -qE '^(eval_time_ratio|eval_success_(ep2|last)|val_loss|runs_sliding|torsional)' \
   "$PT_WORK/held.out"
+
+# --- 4. the study refitted offline -------------------------------------------------------
+REFIT=$PT_BIN/nudge-refit
+# refit_refused WORD ARGS...: nudge-refit ARGS exits 2 and its stderr names WORD.
+refit_refused() {
+  local word=$1 rc
+  shift
+  "$REFIT" "$@" >/dev/null 2>"$PT_WORK/refit.err"
+  rc=$?
+  if ((rc == 2)) && grep -q -- "$word" "$PT_WORK/refit.err"; then
+    pt_ok "nudge-refit $* -> status 2 naming $word"
+  else
+    pt_fail "nudge-refit $* -> status $rc (want 2), stderr: $(head -c 300 "$PT_WORK/refit.err")"
+  fi
+}
+refit_refused "--study" --csv "$PT_WORK/r.csv"
+refit_refused "config.txt" --study "$PT_WORK"
+refit_refused "--pop" --study "$OUT" -- --pop 1
+"$REFIT" --study "$OUT" --csv "$PT_WORK/refit.csv" >"$PT_WORK/refit.out" 2>"$PT_WORK/refit.err"
+rc=$?
+cat "$PT_WORK/refit.out"
+pt_check "nudge-refit exits 0 (got $rc)" test "$rc" -eq 0
+for e in 1 2; do
+  pt_check "episode $e refitted to the study's theta and validation loss (ratio $(fig \
+    val_loss_ratio_ep$e "$PT_WORK/refit.out"), runs lower $(fig runs_lower_ep$e "$PT_WORK/refit.out"))" \
+    awk -F, -v e="$e" -v r="$(fig val_loss_ratio_ep$e "$PT_WORK/refit.out")" \
+      -v l="$(fig runs_lower_ep$e "$PT_WORK/refit.out")" -v s="$(col "$e" slide)" \
+      -v t="$(col "$e" torsion)" 'NR > 1 && $2 == e { n++; if ($3 != s || $4 != t || $10 != $11) bad = 1 }
+      END { exit bad || n != 1 || r != "1.000" || l != "0/1" }' "$PT_WORK/refit.csv"
+done
+"$REFIT" --study "$OUT" --csv "$PT_WORK/refit2.csv" -- --seed 2 >/dev/null 2>"$PT_WORK/refit2.err"
+pt_check "with --seed 2 the refit of episode 2 differs from the study's ($(col 2 slide))" \
+  awk -F, -v s="$(col 2 slide)" 'NR > 1 && $2 == 2 { n++; d = ($3 != s) }
+    END { exit !(n == 1 && d) }' "$PT_WORK/refit2.csv"
 pt_sanitizer_scan "$OUT" || true
 pt_sanitizer_scan "$OUT0" || true
 ((PT_FAILS)) && { tail -n 20 "$PT_WORK/study.err"; pt_dump_logs 2>/dev/null; }
