@@ -5,6 +5,7 @@
  *   watch.c   the replay buffer: reading what was appended, skipping bad records
  *   fitter.c  the fit thread: one nds_fit_run per job
  *   params.c  a finished fit: the next version, the history, PARAMS
+ *   batch.c   a whole buffer read at once, with the replays' model and a fit
  *   score.c   --score: one replay of the whole buffer at a given theta, no LCM
  *   offline.c --offline: the watching loop's refits on a recorded buffer, no LCM
  *
@@ -111,6 +112,27 @@ typedef struct {
  * status (usage or refusal printed). */
 int adapter_options(int argc, char **argv, adapter_opts *o, nds_fit_cfg *fc);
 
+/* batch.c: the replays' model, the default scene at o->replay_dt with theta. 0, or -1 and
+ * a message. */
+int adapter_model_init(const adapter_opts *o, const double theta[ND_NTHETA], nds_model *m,
+                       char *err, int errlen);
+
+/* A whole buffer for the modes that read it and exit: all of it is owned here. */
+typedef struct {
+  nd_rollout *rs;             /* o->buffer's complete records, file order */
+  int n;
+  nds_model model;            /* the replays' model at the theta given */
+  int have_model;
+  nd_pool *pool;
+  nds_fit *fit;               /* on model and pool */
+} adapter_batch;
+
+/* Read o->buffer (at least one rollout, else a message naming it and what it was for),
+ * build the model at theta and a fit of fc. 0, or -1 and a message; close b either way. */
+int adapter_batch_open(adapter_batch *b, const adapter_opts *o, const nds_fit_cfg *fc,
+                       const double theta[ND_NTHETA], const char *what, char *err, int errlen);
+void adapter_batch_close(adapter_batch *b);
+
 /* score.c: L(o->score) on every rollout of o->buffer, printed as 'name value unit'
  * lines; the exit status (0, 1 unreadable or failed). */
 int adapter_score(const adapter_opts *o, const nds_fit_cfg *fc);
@@ -123,8 +145,9 @@ int adapter_offline(const adapter_opts *o, const nds_fit_cfg *fc);
 /* watch.c */
 void adapter_poll(adapter *a);            /* read what was appended (no fit running) */
 void adapter_close(adapter *a);           /* close the buffer, drop its records */
-/* " (the newest of TOTAL)" into buf when --max-rollouts left records out of the fit, else "". */
-const char *adapter_window_note(const adapter *a, char *buf, int len);
+/* " (the newest of TOTAL)" into buf when a fit on n records left some of the total read
+ * out (--max-rollouts), else "". */
+const char *adapter_window_note(int n, int total, char *buf, int len);
 
 /* fitter.c */
 int adapter_fitter_start(adapter_fitter *ft, char *err, int errlen);

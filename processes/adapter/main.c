@@ -33,7 +33,7 @@ static void step(adapter *a, adapter_fitter *ft, const nd_history_summary *hs, i
     a->st.state = "fitting";
     char of[48];
     fprintf(stderr, PROG ": refitting on %d rollout(s)%s (%d new)\n", a->n,
-            adapter_window_note(a, of, sizeof(of)), a->total - a->covered);
+            adapter_window_note(a->n, a->total, of, sizeof(of)), a->total - a->covered);
   } else if (strcmp(a->st.state, "error")) {
     a->st.state = "idle";
   }
@@ -62,11 +62,7 @@ int main(int argc, char **argv) {
   a.st.state = "starting";
   nd_pool *pool = NULL;
   static nd_history_summary hs;
-  nds_scene_cfg sc;
-  nds_scene_cfg_default(&sc);
-  sc.timestep = o.replay_dt;
-  memcpy(sc.theta, o.theta, sizeof(sc.theta));
-  if (nds_model_init(&a.model, &sc, err, sizeof(err)) ||
+  if (adapter_model_init(&o, o.theta, &a.model, err, sizeof(err)) ||
       adapter_open_history(&a, &hs, err, sizeof(err)))
     goto done;
   /* Seeded from the version reached, so a restart does not redraw the first run's samples. */

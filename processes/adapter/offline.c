@@ -3,53 +3,35 @@
  * distribution, as the watching adapter's do: the same options and records give the same
  * thetas, and a buffer a study or a robot recorded can be refitted with other options. */
 #include <stdio.h>
-#include <stdlib.h>
 #include <string.h>
 
 #include "adapter.h"
 
 int adapter_offline(const adapter_opts *o, const nds_fit_cfg *fc) {
   char err[512] = "";
-  int status = 1, n = 0, fits = 0;
-  nd_rollout *rs = NULL;
-  nd_pool *pool = NULL;
-  nds_fit *fit = NULL;
-  nds_model model;
-  int have_model = 0;
-  nds_scene_cfg sc;
-  nds_scene_cfg_default(&sc);
-  sc.timestep = o->replay_dt;
-  memcpy(sc.theta, o->theta, sizeof(sc.theta));
+  int status = 1, fits = 0;
+  adapter_batch b;
   nds_fit_cfg cfg = *fc;
   cfg.seed = o->seed;  /* a fresh history's: version 0 */
   nds_fit_out out;
   memset(&out, 0, sizeof(out));
-  if (nd_rbuf_read_all(o->buffer, &rs, &n, NULL, err, sizeof(err))) goto done;
-  if (nds_model_init(&model, &sc, err, sizeof(err))) goto done;
-  have_model = 1;
+  if (adapter_batch_open(&b, o, &cfg, o->theta, "fit", err, sizeof(err))) goto done;
   /* A record the model cannot replay is skipped, as the watching adapter skips it. */
   int kept = 0;
-  for (int i = 0; i < n; i++) {
+  for (int i = 0; i < b.n; i++) {
     char why[256];
-    if (nds_replay_check(&model, &rs[i], why, sizeof(why))) {
+    if (nds_replay_check(&b.model, &b.rs[i], why, sizeof(why))) {
       fprintf(stderr, PROG ": %s: skipped rollout %d: %s\n", o->buffer, i + 1, why);
-      nd_rollout_free(&rs[i]);
+      nd_rollout_free(&b.rs[i]);
     } else {
-      rs[kept++] = rs[i];
+      b.rs[kept++] = b.rs[i];
     }
   }
-  n = kept;
-  if (n == 0) {
-    snprintf(err, sizeof(err), "%s holds no complete rollout to fit", o->buffer);
-    goto done;
-  }
-  if (!(pool = nd_pool_create(o->threads, err, sizeof(err))) ||
-      !(fit = nds_fit_create(&model, &cfg, pool, err, sizeof(err))))
-    goto done;
-  for (int total = 1; total <= n; total++) {
+  b.n = kept;
+  for (int total = 1; total <= b.n; total++) {
     const int first = o->max_rollouts > 0 && total > o->max_rollouts ? total - o->max_rollouts : 0;
     const double t0 = ndp_mono();
-    if (nds_fit_run(fit, rs + first, total - first, &out, err, sizeof(err))) {
+    if (nds_fit_run(b.fit, b.rs + first, total - first, &out, err, sizeof(err))) {
       /* The watching adapter waits for more rollouts after a failed refit: so here. */
       fprintf(stderr, PROG ": refit on %d rollout(s) failed: %s\n", total - first, err);
       continue;
@@ -66,9 +48,6 @@ int adapter_offline(const adapter_opts *o, const nds_fit_cfg *fc) {
   status = 0;
 done:
   if (status) fprintf(stderr, PROG ": --offline: %s\n", err);
-  nds_fit_free(fit);
-  nd_pool_free(pool);
-  if (have_model) nds_model_free(&model);
-  nd_rbuf_free_all(rs, n);
+  adapter_batch_close(&b);
   return status;
 }

@@ -24,12 +24,11 @@ int adapter_publish(adapter *a) {
 }
 
 void adapter_print_refit(int64_t version, int n, int total, double secs, const nds_fit_out *out) {
-  char mean[200], std[200], of[48] = "";
+  char mean[200], std[200], of[48];
   nd_theta_str(out->mean, " ", mean, sizeof(mean));
   nd_theta_str(out->std, " ", std, sizeof(std));
-  if (n < total) snprintf(of, sizeof(of), " (the newest of %d)", total);
   printf("refit version %lld: %d rollout(s)%s in %.2f s, loss %.4g%s%s%s, theta %s, std %s\n",
-         (long long)version, n, of, secs, out->loss_mean,
+         (long long)version, n, adapter_window_note(n, total, of, sizeof(of)), secs, out->loss_mean,
          out->diverged_mean ? " (mean diverged on some)" : "",
          out->flat ? " (flat: the rollouts do not tell the candidates apart; theta kept)" : "",
          out->scan_moved ? " (moved by the scan)" : "", mean, std);

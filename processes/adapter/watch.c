@@ -169,9 +169,9 @@ void adapter_poll(adapter *a) {
 }
 
 
-const char *adapter_window_note(const adapter *a, char *buf, int len) {
+const char *adapter_window_note(int n, int total, char *buf, int len) {
   buf[0] = '\0';
-  if (a->n < a->total) snprintf(buf, len, " (the newest of %d)", a->total);
+  if (n < total) snprintf(buf, len, " (the newest of %d)", total);
   return buf;
 }
 

@@ -330,9 +330,9 @@ static void offline_repeats_the_live_refits(void **state) {
   }
   /* One refit per rollout, the last on all of them, and its theta as name value unit
    * lines: the slide entry as printed on the line, to its 6 digits. */
-  char last[256], want[64];
+  char last[256], beyond[256], want[64];
   assert_true(refit_theta(out, n, last, sizeof(last)));
-  assert_false(refit_theta(out, n + 1, last + 128, 64));
+  assert_false(refit_theta(out, n + 1, beyond, sizeof(beyond)));
   snprintf(cmd, sizeof(cmd),
            "grep -q '^refit version %d: %d rollout(s) in' '%s' && grep -qx 'refits %d count' '%s'",
            n, n, out, n, out);

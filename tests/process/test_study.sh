@@ -34,18 +34,20 @@ pt_init "$@"
 STUDY=$PT_BIN/nudge-study
 [[ -x $STUDY ]] || { echo "$PT_NAME: $STUDY is missing: build first" >&2; exit 1; }
 
-# refused CODE WORD ARGS...: nudge-study ARGS exits CODE and its stderr names WORD.
-refused() {
-  local code=$1 word=$2 rc
-  shift 2
-  "$STUDY" "$@" >/dev/null 2>"$PT_WORK/refused.err"
+# refused_by PROG CODE WORD ARGS...: PROG ARGS exits CODE and its stderr names WORD.
+refused_by() {
+  local prog=$1 code=$2 word=$3 rc
+  shift 3
+  "$prog" "$@" >/dev/null 2>"$PT_WORK/refused.err"
   rc=$?
   if ((rc == code)) && grep -q -- "$word" "$PT_WORK/refused.err"; then
-    pt_ok "nudge-study $* -> status $code naming $word"
+    pt_ok "${prog##*/} $* -> status $code naming $word"
   else
-    pt_fail "nudge-study $* -> status $rc (want $code), stderr: $(head -c 300 "$PT_WORK/refused.err")"
+    pt_fail "${prog##*/} $* -> status $rc (want $code), stderr: $(head -c 300 "$PT_WORK/refused.err")"
   fi
 }
+# refused CODE WORD ARGS...: the same for nudge-study.
+refused() { refused_by "$STUDY" "$@"; }
 
 # --- 1. bad arguments --------------------------------------------------------------------
 refused 2 "--out" --runs 1
@@ -271,21 +273,9 @@ pt_check_not "no figure of a fit or of later episodes" \
 
 # --- 4. the study refitted offline -------------------------------------------------------
 REFIT=$PT_BIN/nudge-refit
-# refit_refused WORD ARGS...: nudge-refit ARGS exits 2 and its stderr names WORD.
-refit_refused() {
-  local word=$1 rc
-  shift
-  "$REFIT" "$@" >/dev/null 2>"$PT_WORK/refit.err"
-  rc=$?
-  if ((rc == 2)) && grep -q -- "$word" "$PT_WORK/refit.err"; then
-    pt_ok "nudge-refit $* -> status 2 naming $word"
-  else
-    pt_fail "nudge-refit $* -> status $rc (want 2), stderr: $(head -c 300 "$PT_WORK/refit.err")"
-  fi
-}
-refit_refused "--study" --csv "$PT_WORK/r.csv"
-refit_refused "config.txt" --study "$PT_WORK"
-refit_refused "--pop" --study "$OUT" -- --pop 1
+refused_by "$REFIT" 2 "--study" --csv "$PT_WORK/r.csv"
+refused_by "$REFIT" 2 "config.txt" --study "$PT_WORK"
+refused_by "$REFIT" 2 "--pop" --study "$OUT" -- --pop 1
 "$REFIT" --study "$OUT" --csv "$PT_WORK/refit.csv" >"$PT_WORK/refit.out" 2>"$PT_WORK/refit.err"
 rc=$?
 cat "$PT_WORK/refit.out"
