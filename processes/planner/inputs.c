@@ -36,6 +36,7 @@ static void use_robot_state(void *user, const nudge_robot_state_t *m) {
   p->st.received++;
   p->rs = *m;
   ndp_input_got(&p->in_rs, m->utime);
+  if (m->mode == NUDGE_ROBOT_STATE_T_MODE_STOPPED) p->stopped_at = ndp_mono();
 }
 
 static void use_ee_cmd(void *user, const nudge_ee_cmd_t *m) {

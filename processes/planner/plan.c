@@ -272,8 +272,10 @@ static int park_step(planner_proc *p, double now, char *err, int errlen) {
     const char *why = park_plan(p, &b);
     if (why) {
       p->parking = 0;
-      fprintf(stderr, PROG ": PLACE %lld: the sphere does not park at (%+.3f, %+.3f) m: %s\n",
-              (long long)p->place.place_id, p->place.park_x, p->place.park_y, why);
+      fprintf(stderr, PROG ": PLACE %lld: the sphere does not park at (%+.3f, %+.3f) m from "
+              "(%+.3f, %+.3f) m, the object at (%+.3f, %+.3f) m, yaw %+.1f deg: %s\n",
+              (long long)p->place.place_id, p->place.park_x, p->place.park_y, p->rs.ee_pos[0],
+              p->rs.ee_pos[1], b.x, b.y, b.yaw * 180.0 / ND_PI, why);
       return 0;
     }
     char way[PLANNER_PARK_LEGS * 20] = "";
@@ -310,6 +312,9 @@ static int park_step(planner_proc *p, double now, char *err, int errlen) {
 }
 
 int planner_keep_clear(planner_proc *p, double now, char *err, int errlen) {
+  /* A stopped arm takes no PLAN until a TASK or PLACE resumes it: nothing to renew, and no
+   * park move is spent on it. */
+  if (p->rs.mode == NUDGE_ROBOT_STATE_T_MODE_STOPPED) return 0;
   if (now < p->release_until) {
     if (now - p->released_at < PLANNER_RELEASE_RENEW || !release_sensed(p, now)) return 0;
     const nd_release_box b = release_box(p, now);
@@ -344,8 +349,9 @@ int planner_place(planner_proc *p, double now, char *err, int errlen) {
   const nd_release_box b = release_box(p, now);
   /* A release on its way rests the sphere at its key, not where it is now, and a key clear
    * of the object's old pose may lie in the placed one: the rest point is found from there,
-   * one move rather than a move and a re-clear. */
-  const int in_flight = now < p->release_until;
+   * one move rather than a move and a re-clear. One sent before the arm stopped on a
+   * reflex is not on its way: the arm rests where the reflex braked it. */
+  const int in_flight = now < p->release_until && p->released_at > p->stopped_at;
   const double *from = in_flight ? p->release_key : p->rs.ee_pos;
   double key[2];
   const double moved = release_key(p, now, &b, from, key);

@@ -121,6 +121,7 @@ typedef struct {
   double released_at;          /* when the last release was published, s (ndp_mono) */
   double release_until;        /* when its segment ends, s (ndp_mono) */
   double release_key[2];       /* where it rests the sphere */
+  double stopped_at;           /* the newest ROBOT_STATE saying STOPPED came, s (ndp_mono) */
   double obj_half[2], ee_radius; /* the model's object half sides and sphere radius, m */
   nudge_place_t place;         /* the newest PLACE (place_id -1: none) */
   int place_due;               /* a new PLACE: send the sphere clear of its pose */
@@ -174,7 +175,8 @@ int planner_place(planner_proc *p, double now, char *err, int errlen);
 /* While idle after a release: re-send it until its segment ends (PLANNER_RELEASE_RENEW);
  * then the next move of a PLACE's park (PLANNER_PARK_*); otherwise, if the object has come
  * closer to the sphere than PLANNER_RECLEAR x --release, publish the release again
- * (PLANNER_RECLEAR_*). Return 0, or -1 with a message (LCM). */
+ * (PLANNER_RECLEAR_*); nothing while the arm is stopped. Return 0, or -1 with a message
+ * (LCM). */
 int planner_keep_clear(planner_proc *p, double now, char *err, int errlen);
 
 #endif
