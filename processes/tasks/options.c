@@ -145,7 +145,8 @@ int tasks_options(int argc, char **argv, tasks_cfg *c) {
       {"park", ND_OPT_LIST, c->park_xy, -NDP_MAX_POS, NDP_MAX_POS, 2, .arg = "X,Y", .def = "",
        .help = "with --place: before each task, once the object is placed, the planner "
                "also takes the sphere round it to this point (m), and the runner waits for it "
-               "there: every task starts from one sphere pose as well as one object pose"},
+               "there (an object moved off the pose before then is placed again): every task "
+               "starts from one sphere pose as well as one object pose"},
       {"place-wait", ND_OPT_DOUBLE, &c->place_wait, 0.1, 3600.0, .arg = "S",
        .help = "with --place: how long to wait for the object at the pose before giving up "
                "(status 1)"},

@@ -265,9 +265,16 @@ static int parked(const tasks_io *io, const tasks_cfg *c) {
          PARK_AT;
 }
 
+/* A new PLACE (a new place_id) in m, sent at once and not yet seen done. */
+static void place_anew(nudge_place_t *m, int *seen, double *sent) {
+  m->utime = m->place_id = ndp_utime();
+  *seen = 0;
+  *sent = -INFINITY;
+}
+
 /* One PLACE, re-sent until a frame captured after it shows the object there and, with
- * --park, one the sphere parked (the object may be knocked off the pose by then:
- * tasks_place checks it once settled, and places it again): 1, or 0 past c->place_wait (or
+ * --park, one the sphere parked (an object moved off the pose before then is placed again
+ * here; after, tasks_place checks it once settled): 1, or 0 past c->place_wait (or
  * interrupted), -1 with a message on an LCM failure. */
 static int place_once(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int errlen) {
   io->st.state = "placing";
@@ -290,10 +297,18 @@ static int place_once(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, i
         now - io->ee_moving_at >= STOP_REST) {
       fprintf(stderr, PROG ": the robot stopped on a reflex while placing: placing again at "
               "rest, which resumes it\n");
-      m.utime = m.place_id = ndp_utime();
-      seen = 0;
-      sent = -INFINITY;
+      place_anew(&m, &seen, &sent);
       acked = io->stops_between;
+    }
+    /* Seen at the pose, then moved off it before the sphere parked (knocked on a way the
+     * planner did not plan, a hand): the park, planned round the pose, cannot end. A new
+     * PLACE puts the object back and parks afresh. */
+    if (seen && c->park && !at_pose(io, g) && !parked(io, c)) {
+      double pos, yaw;
+      pose_error(io, g, &pos, &yaw);
+      fprintf(stderr, PROG ": the object was moved %.1f mm and %.3f rad off the placed pose "
+              "while the sphere parked: placing it again\n", 1e3 * pos, yaw);
+      place_anew(&m, &seen, &sent);
     }
     if (io->frames > 0 && io->last.utime > m.utime && !seen) seen = at_pose(io, g);
     if (seen && (!c->park || parked(io, c))) return 1;

@@ -19,6 +19,8 @@
 #    no task running, and the runner counts it as reflex_stops_between and names it. Then
 #    a stop with no task to come, and a PLACE of the object onto the stopped sphere: the
 #    PLACE resumes the arm, the planner moves the sphere clear, the object is put there.
+#    Then a stop while placing, and a bump while the sphere parks: each time the runner
+#    places again, the planner parks the sphere afresh, and the task runs.
 # 3. nudge-up demo --world lab on the lab goal chain: all five tasks run, every stop is
 #    reported (the runner's reflex_stops equals its stopped tasks; the bridge logged at
 #    least as many as the runner counted in tasks and between them), the run stops
@@ -161,33 +163,69 @@ if pt_up_wait "$RUN" 30 "$up"; then
   pt_check "the PLACE resumed the stopped arm and the object was put down" \
     pt_wait_for 15 grep -qF "$placed" "$RUN/bridge.log"
   pt_check_not "no PLACE dropped" grep -q 'dropped: the sphere stayed' "$RUN/bridge.log"
-  # A stop while the sphere parks: plans out of reach stop the arm on its way to the park
-  # point. The runner places again, which resumes it; the planner parks anew; the task runs.
-  n_park=$(grep -c 'the sphere parks at' "$RUN/planner.log")
+  # A stop while placing: plans out of reach, from when the planner takes up the runner's
+  # PLACE until the arm stops, keep the sphere moving on y = 0, x >= 0.15, clear of the pose
+  # at the origin: the object cannot be put down at rest, nor the park end, before the stop.
+  # The runner places again once the arm rests, which resumes it; the planner parks the
+  # sphere round the object afresh; the task runs from the park.
+  n_place=$(grep -c ': PLACE [0-9]* at ' "$RUN/planner.log")
   n_stop=$(grep -c 'the robot stopped' "$RUN/bridge.log")
   n_lines=$(wc -l <"$RUN/bridge.log")
+  n_plines=$(wc -l <"$RUN/planner.log")
   pt_spawn tasks "$PT_BIN/nudge-tasks" --world lab --place 0,0,0 --park -0.10,0 \
     --goal 0.10,0.10,0.4 --tau "$(pt_slow 2)" --place-wait "$(pt_slow 30)" \
     >"$PT_WORK/park-stop.out" 2>"$PT_WORK/park-stop.err"
-  pt_wait_for 30 eval '(( $(grep -c "the sphere parks at" "$RUN/planner.log") > n_park ))' ||
-    pt_fail "the planner did not start a park"
+  pt_wait_for 30 eval '(( $(grep -c ": PLACE [0-9]* at " "$RUN/planner.log") > n_place ))' ||
+    pt_fail "the planner did not take up the PLACE"
   drive_to_stop "$n_stop" 12
-  pt_check "the arm stopped while the sphere parked" \
+  pt_check "the arm stopped while placing" \
     test "$(grep -c 'the robot stopped' "$RUN/bridge.log")" -gt "$n_stop"
   if pt_wait_pid "$tasks" "$(pt_slow 60)"; then
-    pt_check "nudge-tasks exits 0 after a stop in the park (got $PT_RC)" test "$PT_RC" -eq 0
+    pt_check "nudge-tasks exits 0 after a stop while placing (got $PT_RC)" test "$PT_RC" -eq 0
   else
-    pt_fail "nudge-tasks did not finish after a stop in the park"
+    pt_fail "nudge-tasks did not finish after a stop while placing"
   fi
   cat "$PT_WORK/park-stop.out"
   pt_check "the runner placed again to resume the arm" \
     grep -q 'stopped on a reflex while placing: placing again at rest' "$PT_WORK/park-stop.err"
+  tail -n +$((n_plines + 1)) "$RUN/planner.log" >"$PT_WORK/park-stop.planner"
+  first=$(sed -n -E 's/.*: PLACE ([0-9]+) at .*/\1/p' "$PT_WORK/park-stop.planner" | head -n 1)
+  parks=$(sed -n -E 's/.*: PLACE ([0-9]+): the sphere parks at .*/\1/p' "$PT_WORK/park-stop.planner" |
+    grep -vx "${first:-none}" | wc -l)
+  pt_check "the planner parked the sphere for a PLACE after the stop ($parks)" test "$parks" -ge 1
   pt_check "the task ran from the park" \
     grep -qE '^task 1/1 .*(reached|timed out|stopped after)' "$PT_WORK/park-stop.out"
   # Resumed while still braking, the arm would meet its held setpoint in a jump.
   pt_check_not "no Cartesian acceleration stop on resuming" \
     bash -c 'tail -n +"$2" "$1" | grep -q "stopped: Cartesian acceleration"' _ "$RUN/bridge.log" \
     $((n_lines + 1))
+  # A bump while the sphere parks: the last task leaves the sphere on the object's -y side,
+  # so the park at (0, 0.12) goes round two corners, over a second. A PLACE elsewhere, sent
+  # as the park starts, moves the object off the pose and ends the planner's park. The
+  # runner places the object again (at once; or, had the park ended first, before the
+  # task), the planner parks afresh, and the task runs. Without the first, the runner would
+  # wait --place-wait for a park that cannot end.
+  n_park=$(grep -c 'the sphere parks at' "$RUN/planner.log")
+  n_plines=$(wc -l <"$RUN/planner.log")
+  pt_spawn tasks "$PT_BIN/nudge-tasks" --world lab --place 0,0,0 --park 0,0.12 \
+    --goal 0.10,0.10,0.4 --tau "$(pt_slow 2)" --place-wait "$(pt_slow 30)" \
+    >"$PT_WORK/park-bump.out" 2>"$PT_WORK/park-bump.err"
+  pt_wait_for 30 eval '(( $(grep -c "the sphere parks at" "$RUN/planner.log") > n_park ))' ||
+    pt_fail "the planner did not start a park"
+  out=$("$PT_INJ" --place-at -0.05,0.25,0 2>&1) || pt_fail "nudge-inject --place-at failed: $out"
+  if pt_wait_pid "$tasks" "$(pt_slow 60)"; then
+    pt_check "nudge-tasks exits 0 after a bump in the park (got $PT_RC)" test "$PT_RC" -eq 0
+  else
+    pt_fail "nudge-tasks did not finish after a bump in the park"
+  fi
+  cat "$PT_WORK/park-bump.out"
+  again=$(grep -oE 'off the placed pose (while the sphere parked|before the task): placing it again' \
+    "$PT_WORK/park-bump.err" | head -n 1)
+  pt_check "the runner placed the bumped object again (${again:-no})" test -n "$again"
+  parks=$(tail -n +$((n_plines + 1)) "$RUN/planner.log" | grep -c 'the sphere parks at (+0.000, +0.120)')
+  pt_check "the planner parked the sphere again ($parks parks)" test "$parks" -ge 2
+  pt_check "the task ran from the park" \
+    grep -qE '^task 1/1 .*(reached|timed out|stopped after)' "$PT_WORK/park-bump.out"
   pt_stop_logger
   pt_up_stop "$up" 30
   pt_check "nudge-up run exits 0 after SIGINT (got $PT_RC)" test "$PT_RC" -eq 0
