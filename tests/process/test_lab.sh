@@ -165,7 +165,7 @@ if pt_up_wait "$RUN" 30 "$up"; then
   pt_check_not "no PLACE dropped" grep -q 'dropped: the sphere stayed' "$RUN/bridge.log"
   # A stop while placing: plans out of reach, from when the planner takes up the runner's
   # PLACE until the arm stops, keep the sphere moving on y = 0, x >= 0.15, clear of the pose
-  # at the origin: the object cannot be put down at rest, nor the park end, before the stop.
+  # at the origin: the park cannot end before the stop (the object may go down in a gap).
   # The runner places again once the arm rests, which resumes it; the planner parks the
   # sphere round the object afresh; the task runs from the park.
   n_place=$(grep -c ': PLACE [0-9]* at ' "$RUN/planner.log")
