@@ -265,6 +265,14 @@ static int parked(const tasks_io *io, const tasks_cfg *c) {
          PARK_AT;
 }
 
+/* "the object was moved ... off the placed pose WHEN: placing it again", by the newest frame. */
+static void say_moved(const tasks_io *io, const nd_goal *g, const char *when) {
+  double pos, yaw;
+  pose_error(io, g, &pos, &yaw);
+  fprintf(stderr, PROG ": the object was moved %.1f mm and %.3f rad off the placed pose %s: "
+          "placing it again\n", 1e3 * pos, yaw, when);
+}
+
 /* A new PLACE (a new place_id) in m, sent at once and not yet seen done. */
 static void place_anew(nudge_place_t *m, int *seen, double *sent) {
   m->utime = m->place_id = ndp_utime();
@@ -304,10 +312,7 @@ static int place_once(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, i
      * planner did not plan, a hand): the park, planned round the pose, cannot end. A new
      * PLACE puts the object back and parks afresh. */
     if (seen && c->park && !at_pose(io, g) && !parked(io, c)) {
-      double pos, yaw;
-      pose_error(io, g, &pos, &yaw);
-      fprintf(stderr, PROG ": the object was moved %.1f mm and %.3f rad off the placed pose "
-              "while the sphere parked: placing it again\n", 1e3 * pos, yaw);
+      say_moved(io, g, "while the sphere parked");
       place_anew(&m, &seen, &sent);
     }
     if (io->frames > 0 && io->last.utime > m.utime && !seen) seen = at_pose(io, g);
@@ -335,9 +340,7 @@ int tasks_place(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, int err
   const nd_goal *g = &c->place_pose;
   double pos = 0.0, yaw = 0.0;
   for (int k = 0; k < PLACE_TRIES; k++) {
-    if (k > 0)
-      fprintf(stderr, PROG ": the object was moved %.1f mm and %.3f rad off the placed pose "
-              "before the task: placing it again\n", 1e3 * pos, yaw);
+    if (k > 0) say_moved(io, g, "before the task");
     const int pl = place_once(lcm, io, c, err, errlen);
     if (pl <= 0) return pl;
     if (tasks_settle(lcm, io, c, err, errlen)) return -1;
