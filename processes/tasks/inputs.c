@@ -65,12 +65,14 @@ static void use_robot_state(void *user, const nudge_robot_state_t *m) {
     io->run.reflex = m->reflex;
     io->run.reflex_joint = m->reflex_joint;
   }
-  /* A stop between tasks (the release after one, the sphere kept clear) ends no task, but
-   * the robot made it all the same: count and say it. */
+  /* A stop between tasks (the release after one, the sphere kept clear or parked) ends no
+   * task, but the robot made it all the same: count it, and say when it came. */
   const int stopped = m->mode == NUDGE_ROBOT_STATE_T_MODE_STOPPED;
   if (stopped && io->robot_stopped == 0 && io->run.id < 0) {
     io->stops_between++;
-    fprintf(stderr, PROG ": the robot stopped on a reflex between tasks: %s\n",
+    const int placing = strcmp(io->st.state, "placing") == 0;
+    fprintf(stderr, PROG ": the robot stopped on a reflex %s: %s\n",
+            placing ? "while placing" : "between tasks",
             tasks_reflex_name(m->reflex, m->reflex_joint));
   }
   io->robot_stopped = stopped;

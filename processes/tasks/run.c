@@ -303,8 +303,7 @@ static int place_once(lcm_t *lcm, tasks_io *io, const tasks_cfg *c, char *err, i
      * (STOP_REST), whose park the planner starts afresh from where the sphere stopped. */
     if (io->stops_between > acked && io->robot_stopped == 1 &&
         now - io->ee_moving_at >= STOP_REST) {
-      fprintf(stderr, PROG ": the robot stopped on a reflex while placing: placing again at "
-              "rest, which resumes it\n");
+      fprintf(stderr, PROG ": the stopped arm is at rest: placing again, which resumes it\n");
       place_anew(&m, &seen, &sent);
       acked = io->stops_between;
     }

@@ -186,8 +186,10 @@ if pt_up_wait "$RUN" 30 "$up"; then
     pt_fail "nudge-tasks did not finish after a stop while placing"
   fi
   cat "$PT_WORK/park-stop.out"
+  pt_check "the runner named the stop while placing" \
+    grep -qE 'stopped on a reflex while placing: joint [1-7]' "$PT_WORK/park-stop.err"
   pt_check "the runner placed again to resume the arm" \
-    grep -q 'stopped on a reflex while placing: placing again at rest' "$PT_WORK/park-stop.err"
+    grep -q 'the stopped arm is at rest: placing again' "$PT_WORK/park-stop.err"
   tail -n +$((n_plines + 1)) "$RUN/planner.log" >"$PT_WORK/park-stop.planner"
   first=$(sed -n -E 's/.*: PLACE ([0-9]+) at .*/\1/p' "$PT_WORK/park-stop.planner" | head -n 1)
   parks=$(sed -n -E 's/.*: PLACE ([0-9]+): the sphere parks at .*/\1/p' "$PT_WORK/park-stop.planner" |
